@@ -88,8 +88,16 @@ def matrix_to_quat(R: Mat3) -> Quat:
     k = jnp.argmax(pivots, axis=-1)
     # The selected pivot is >= 1 for a rotation matrix, so sqrt is safe there; guard the rest.
     s = 2 * jnp.sqrt(jnp.maximum(jnp.max(pivots, axis=-1), 0.25))  # = 4 |e_k|
-    d21, d02, d10 = R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]
-    a21, a02, a10 = R[..., 2, 1] + R[..., 1, 2], R[..., 0, 2] + R[..., 2, 0], R[..., 1, 0] + R[..., 0, 1]
+    d21, d02, d10 = (
+        R[..., 2, 1] - R[..., 1, 2],
+        R[..., 0, 2] - R[..., 2, 0],
+        R[..., 1, 0] - R[..., 0, 1],
+    )
+    a21, a02, a10 = (
+        R[..., 2, 1] + R[..., 1, 2],
+        R[..., 0, 2] + R[..., 2, 0],
+        R[..., 1, 0] + R[..., 0, 1],
+    )
     candidates = jnp.stack(
         [
             jnp.stack([s / 4, d21 / s, d02 / s, d10 / s], axis=-1),

@@ -1,0 +1,26 @@
+"""Result codes of a simulation: diffrax's, plus bad-input codes (one per batch member)."""
+
+import diffrax as dfx
+
+
+class RESULTS(dfx.RESULTS):  # pyright: ignore
+    """`simulate`'s outcome. `RESULTS.successful` or the first problem found.
+
+    Extends `diffrax.RESULTS` (max_steps_reached, dt_min_reached, ...) with input checks that
+    also work on traced values under jit and vmap.
+    """
+
+    invalid_mass = "the body's mass must be finite and > 0."
+    invalid_inertia = (
+        "the inertia tensor must be finite, symmetric, positive definite and satisfy the "
+        "triangle inequality."
+    )
+    nonfinite_state = "the initial state contains NaN or inf."
+    zero_quaternion = "the initial quaternion has zero norm."
+    decreasing_times = "the save times `ts` must be non-decreasing."
+    invalid_restitution = "the floor's restitution must be in [0, 1]."
+    invalid_friction = "the floor's friction coefficient must be finite and >= 0."
+    max_impacts_reached = "the maximum number of impacts was reached before the end time."
+    starts_below_floor = (
+        "the body starts below the floor (its lowest point is under the floor plane)."
+    )
