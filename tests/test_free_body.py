@@ -166,3 +166,63 @@ def test_drag_matches_closed_form_fall():
     v_inf = m * g / c
     v = v_inf + (v0 - v_inf) * jnp.exp(-c * ts / m)[:, None]
     np.testing.assert_allclose(traj.states.vel, v, atol=1e-10)
+
+
+def test_body_frame_torque_on_spherical_body_is_exact():
+    """Spherical body (w x J w = 0) under a constant body-frame torque: w(t) = w0 + M t / I."""
+    scene = free_scene(
+        jnp.array([2.0, 2.0, 2.0]), (jaxrb.Wrench(torque=(0.0, 0.0, 0.5), frame="body"),)
+    )
+    ts = jnp.linspace(0.0, 2.0, 5)
+    traj = jaxrb.simulate(scene, rest_state((0.3, 0.0, 1.0)), ts, **TIGHT)
+    expected = jnp.stack([jnp.full_like(ts, 0.3), jnp.zeros_like(ts), 1.0 + 0.25 * ts], -1)
+    np.testing.assert_allclose(traj.states.omega, expected, atol=1e-12)
+
+
+def test_time_dependent_world_force():
+    """F(t) = (sin t, 0, 0) N on a 2 kg body: v_x(t) = (1 - cos t) / 2."""
+    scene = jaxrb.Scene(
+        jaxrb.RigidBody(2.0, I123),
+        forces=(jaxrb.Wrench(force=lambda t: jnp.stack([jnp.sin(t), 0.0 * t, 0.0 * t])),),
+    )
+    ts = jnp.linspace(0.0, 3.0, 7)
+    traj = jaxrb.simulate(scene, rest_state((0.0, 0.0, 0.0)), ts, **TIGHT)
+    np.testing.assert_allclose(traj.states.vel[:, 0], (1 - jnp.cos(ts)) / 2, atol=1e-12)
+
+
+@pytest.mark.parametrize("frame", ["world", "body"])
+def test_force_at_body_point_gives_its_moment(frame):
+    """A force at body point p adds p x F (body frame) to the moment about the mass centre."""
+    q = jaxrb.axis_angle_to_quat(jnp.array([0.3, -1.0, 0.5]), 0.7)
+    state = rest_state((0.1, 0.2, -0.3), quat=q)
+    p = jnp.array([0.2, -0.1, 0.4])
+    f = jnp.array([1.0, -2.0, 0.5])
+    force, moment = jaxrb.total_wrench(
+        0.0, state, free_scene(I123, (jaxrb.Wrench(f, point=p, frame=frame),))
+    )
+    f_body = f if frame == "body" else jaxrb.quat_rotate(jaxrb.quat_conjugate(q), f)
+    f_world = f if frame == "world" else jaxrb.quat_rotate(q, f)
+    np.testing.assert_allclose(force, f_world, atol=1e-15)
+    np.testing.assert_allclose(moment, jnp.cross(p, f_body), atol=1e-15)
+    # and the rotational equation turns that moment into J^-1 (M - w x J w)
+    rates = jaxrb.vector_field(
+        0.0, state, free_scene(I123, (jaxrb.Wrench(f, point=p, frame=frame),))
+    )
+    w = state.omega
+    np.testing.assert_allclose(
+        rates.omega, (jnp.cross(p, f_body) - jnp.cross(w, I123 * w)) / I123, atol=1e-14
+    )
+
+
+def test_quadratic_drag_and_damping_moment_terms():
+    """Each force adds only its own terms: F = -k |v| v, M = -(c_w + c_w2 |w|) w."""
+    state = jaxrb.make_state(vel=(3.0, 0.0, 4.0), omega=(0.0, 0.6, 0.8))
+    body = jaxrb.RigidBody(1.0, I123)
+    f, m = jaxrb.QuadraticDrag(0.1).wrench(0.0, state, body)
+    np.testing.assert_allclose(f, -0.1 * 5.0 * jnp.array([3.0, 0.0, 4.0]))
+    np.testing.assert_allclose(m, 0.0)
+    f, m = jaxrb.DampingMoment(0.2, 0.3).wrench(0.0, state, body)
+    np.testing.assert_allclose(f, 0.0)
+    np.testing.assert_allclose(m, -(0.2 + 0.3 * 1.0) * jnp.array([0.0, 0.6, 0.8]))
+    drag = jaxrb.QuadraticDrag.from_air(rho=1.2, drag_coefficient=0.5, area=0.01)
+    np.testing.assert_allclose(drag.coefficient, 0.5 * 1.2 * 0.5 * 0.01)
