@@ -1,0 +1,593 @@
+"""The `jaxrb` command line: run a scene file, sweep a parameter grid, fit, benchmark.
+
+    jaxrb run [SCENE.toml]            simulate, write trajectory (npz, CSV), plots, summary
+    jaxrb sweep [SCENE.toml] -p PATH=SPEC ...   a batch over a parameter grid -> results CSV
+    jaxrb bench [ARGS...]             the benchmark report (source checkout only)
+
+With no scene file the built-in default scene is used (a die thrown with spin onto a table).
+Outputs go to `jaxrb-output/` (change with `-o`); existing files are never overwritten unless
+`--force` is given. The command line computes in float64 (it enables `jax_enable_x64`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import csv
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+DEFAULT_OUTPUT = "jaxrb-output"
+
+_EPILOG_RUN = """\
+outputs (in OUTPUT):
+  trajectory.npz     arrays t, pos, quat, vel, omega, energy, impact_times, impact_energy_lost
+  trajectory.csv     one row per save time: t, x, y, z, e0..e3, vx, vy, vz, wx, wy, wz, energy
+  height_attitude.png, angular_velocity.png, energy.png
+  summary.txt        the printed summary table
+  animation.gif      with --animate
+  scene.toml         a copy of the scene file that was run
+
+frames: pos/vel world frame (z up); omega body frame; quat scalar first, body -> world.
+the scene file format is documented in the default scene: jaxrb run --show-default
+"""
+
+_EPILOG_SWEEP = """\
+grid parameters (-p/--param, repeatable; the grid is their Cartesian product):
+  PATH=START:STOP:NUM   NUM evenly spaced values (inclusive), e.g. floor.restitution=0.2:0.8:4
+  PATH=V1,V2,...        explicit values, e.g. body.mass=0.004,0.005
+PATH is a dotted path into the scene file: body.mass, floor.friction, initial.omega.2,
+forces.1.coefficient (the second [[forces]] table), simulation.t_end, ...
+
+output: OUTPUT/sweep.csv, one row per grid point: the parameters, the solver result,
+final position and speed, |omega|, energies, max height, impacts, solver steps.
+"""
+
+
+class CLIError(Exception):
+    """A user error on the command line: printed as `jaxrb: error: ...`, exit status 2."""
+
+
+# ---------------------------------------------------------------------------------------------
+# helpers
+
+
+def _load(scene_arg):
+    from ._scene_file import default_scene_path, load_scene
+
+    path = default_scene_path() if scene_arg is None else Path(scene_arg)
+    return load_scene(path), path
+
+
+def _outputs_free(outdir: Path, names, force: bool):
+    """Raise a CLIError if any output exists and --force was not given."""
+    existing = [outdir / n for n in names if (outdir / n).exists()]
+    if existing and not force:
+        listing = ", ".join(str(p) for p in existing[:4]) + (" ..." if len(existing) > 4 else "")
+        raise CLIError(
+            f"output already exists: {listing}\n"
+            "  use --force to overwrite, or -o/--output to write somewhere else"
+        )
+    outdir.mkdir(parents=True, exist_ok=True)
+
+
+def _simulate(spec, progress=False, throw=True):
+    import diffrax as dfx
+
+    import jaxrb
+
+    from ._scene_file import make_solver
+
+    kwargs = dict(
+        solver=make_solver(spec.options["solver"]),
+        rtol=spec.options["rtol"],
+        atol=spec.options["atol"],
+        max_steps=spec.options["max_steps"],
+        throw=throw,
+    )
+    if progress and spec.scene.floor is None:
+        kwargs["progress_meter"] = dfx.TqdmProgressMeter()
+    return jaxrb.simulate(spec.scene, spec.state0, spec.ts, **kwargs)
+
+
+def _table(rows, header=None, right=True) -> str:
+    """A plain-text table; the first column left-aligned, the others right-aligned if `right`."""
+    rows = [[str(c) for c in r] for r in rows]
+    if header:
+        rows = [list(header)] + rows
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = []
+    for j, r in enumerate(rows):
+        cells = [r[0].ljust(widths[0])] + [
+            c.rjust(w) if right else c.ljust(w) for c, w in zip(r[1:], widths[1:], strict=True)
+        ]
+        lines.append("  ".join(cells).rstrip())
+        if header and j == 0:
+            lines.append("  ".join("-" * w for w in widths))
+    return "\n".join(lines)
+
+
+def _fmt(x, digits=6):
+    x = np.asarray(x, dtype=float)
+    if x.ndim == 0:
+        return f"{float(x):.{digits}g}"
+    return "(" + ", ".join(f"{v:.{digits}g}" for v in x.reshape(-1)) + ")"
+
+
+def _metrics(traj, scene) -> dict:
+    """Scalar summary metrics of one unbatched trajectory."""
+    import jaxrb
+
+    from .plotting import impact_summary as impact_records
+
+    s = traj.states
+    energy = np.asarray(jaxrb.energy(scene, s), dtype=float)
+    impacts = impact_records(traj, scene)
+    lost_impacts = float(np.nansum(impacts["energy_lost"])) if impacts["times"].size else 0.0
+    pos = np.asarray(s.pos, dtype=float)
+    return {
+        "result": _result_name(traj.result),
+        "final_x": pos[-1, 0],
+        "final_y": pos[-1, 1],
+        "final_z": pos[-1, 2],
+        "max_height": float(pos[:, 2].max()),
+        "final_speed": float(np.linalg.norm(np.asarray(s.vel)[-1])),
+        "final_omega": float(np.linalg.norm(np.asarray(s.omega)[-1])),
+        "energy_start": energy[0],
+        "energy_end": energy[-1],
+        "energy_lost": energy[0] - energy[-1],
+        "energy_lost_impacts": lost_impacts,
+        "impacts": int(impacts["times"].size),
+        "steps": int(np.sum(np.asarray(traj.num_steps))),
+        "quat_norm_drift": float(np.max(np.asarray(traj.quat_norm_drift))),
+    }
+
+
+def _result_name(result) -> str:
+    import jaxrb
+
+    code = np.asarray(result._value if hasattr(result, "_value") else result)
+    if code.ndim:
+        code = code.reshape(-1)[0]
+    if int(code) == int(np.asarray(jaxrb.RESULTS.successful._value)):
+        return "successful"
+    try:
+        return jaxrb.RESULTS[int(code)].replace("\n", " ")
+    except Exception:  # noqa: BLE001 - a name is only cosmetic
+        return f"failed (code {int(code)})"
+
+
+# ---------------------------------------------------------------------------------------------
+# run
+
+
+def _write_trajectory(traj, scene, outdir: Path):
+    import jaxrb
+
+    from .plotting import impact_summary as impact_records
+
+    s = traj.states
+    arrays = {
+        "t": np.asarray(traj.ts, float),
+        "pos": np.asarray(s.pos, float),
+        "quat": np.asarray(s.quat, float),
+        "vel": np.asarray(s.vel, float),
+        "omega": np.asarray(s.omega, float),
+        "energy": np.asarray(jaxrb.energy(scene, s), float),
+    }
+    imp = impact_records(traj, scene)
+    arrays["impact_times"] = imp["times"]
+    arrays["impact_energy_lost"] = imp["energy_lost"]
+    np.savez(outdir / "trajectory.npz", **arrays)
+    header = [
+        "t",
+        "x",
+        "y",
+        "z",
+        "e0",
+        "e1",
+        "e2",
+        "e3",
+        "vx",
+        "vy",
+        "vz",
+        "wx",
+        "wy",
+        "wz",
+        "energy",
+    ]
+    table = np.column_stack(
+        [
+            arrays["t"],
+            arrays["pos"],
+            arrays["quat"],
+            arrays["vel"],
+            arrays["omega"],
+            arrays["energy"],
+        ]
+    )
+    with open(outdir / "trajectory.csv", "w", newline="") as f:
+        f.write(
+            "# jaxrb trajectory: pos/vel world frame (m, m/s); quat scalar first body->world; "
+            "omega body frame (rad/s); energy (J)\n"
+        )
+        w = csv.writer(f)
+        w.writerow(header)
+        w.writerows([[f"{v:.12g}" for v in row] for row in table])
+
+
+def cmd_run(args) -> int:
+    spec, path = _load(args.scene)
+    if args.t_end is not None:
+        if args.t_end <= spec.ts[0]:
+            raise CLIError(
+                f"--t-end must be greater than the start time {spec.ts[0]}, got {args.t_end}"
+            )
+        spec.ts = np.linspace(spec.ts[0], args.t_end, spec.ts.size)
+    outdir = Path(args.output)
+    names = ["trajectory.npz", "trajectory.csv", "summary.txt", "scene.toml"]
+    if not args.no_plots:
+        names += ["height_attitude.png", "angular_velocity.png", "energy.png"]
+    if args.animate:
+        names.append("animation.gif")
+    _outputs_free(outdir, names, args.force)
+    label = "built-in default scene" if args.scene is None else str(path)
+    say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
+    say(
+        f"jaxrb run: {spec.title or label} ({label}); integrating t = {spec.ts[0]:g} .. {spec.ts[-1]:g} s ..."
+    )
+    t0 = time.perf_counter()
+    traj = _simulate(spec, progress=args.progress, throw=False)
+    traj.ts.block_until_ready()
+    wall = time.perf_counter() - t0
+    m = _metrics(traj, spec.scene)
+    if m["result"] != "successful":
+        print(
+            f"jaxrb run: simulation failed: {m['result']}\n  (try smaller rtol/atol or larger "
+            "max_steps in [simulation]); nothing written",
+            file=sys.stderr,
+        )
+        return 1
+    _write_trajectory(traj, spec.scene, outdir)
+    (outdir / "scene.toml").write_text(Path(path).read_text(encoding="utf-8"), encoding="utf-8")
+    written = ["trajectory.npz", "trajectory.csv"]
+    if not args.no_plots:
+        say("writing plots ...")
+        from . import plotting
+
+        for p in plotting.save_run_plots(traj, spec.scene, outdir, title=spec.title or None):
+            written.append(p.name)
+    if args.animate:
+        say("writing animation.gif ...")
+        from . import plotting
+
+        plotting.animate(traj, spec.scene, outdir / "animation.gif", title=spec.title or None)
+        written.append("animation.gif")
+    body = spec.scene.body
+    s = traj.states
+    rows = [
+        ("scene", spec.title or label),
+        ("body mass (kg)", _fmt(body.mass)),
+        ("shape", type(body.shape).__name__ if body.shape is not None else "none"),
+        ("forces", ", ".join(type(f).__name__ for f in spec.scene.forces) or "none"),
+        (
+            "floor (restitution, friction)",
+            "none"
+            if spec.scene.floor is None
+            else f"{float(spec.scene.floor.restitution):g}, {float(spec.scene.floor.friction):g}",
+        ),
+        ("joint", type(spec.scene.joint).__name__ if spec.scene.joint is not None else "none"),
+        ("time span (s)", f"{spec.ts[0]:g} .. {spec.ts[-1]:g} ({spec.ts.size} saves)"),
+        (
+            "solver, rtol, atol",
+            f"{spec.options['solver']}, {spec.options['rtol']:g}, {spec.options['atol']:g}",
+        ),
+        ("result", m["result"]),
+        ("solver steps", m["steps"]),
+        ("impacts", m["impacts"]),
+        ("energy start / end (J)", f"{_fmt(m['energy_start'])} / {_fmt(m['energy_end'])}"),
+        ("energy lost: total (J)", _fmt(m["energy_lost"])),
+        ("energy lost: at impacts (J)", _fmt(m["energy_lost_impacts"])),
+        ("max height of mass centre (m)", _fmt(m["max_height"])),
+        ("final position (m, world)", _fmt(np.asarray(s.pos)[-1], 5)),
+        ("final velocity (m/s, world)", _fmt(np.asarray(s.vel)[-1], 5)),
+        ("final omega (rad/s, body)", _fmt(np.asarray(s.omega)[-1], 5)),
+        ("final quaternion (body->world)", _fmt(np.asarray(s.quat)[-1], 5)),
+        ("max | |q| - 1 | in solver", _fmt(m["quat_norm_drift"], 3)),
+        ("wall time incl. compile (s)", f"{wall:.2f}"),
+        ("output", f"{outdir}/ ({', '.join(written)})"),
+    ]
+    text = _table(rows, header=("quantity", "value"), right=False)
+    (outdir / "summary.txt").write_text(text + "\n", encoding="utf-8")
+    print(text)
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------
+# sweep
+
+
+def _parse_param(text: str):
+    if "=" not in text:
+        raise CLIError(f"--param {text!r}: expected PATH=START:STOP:NUM or PATH=V1,V2,...")
+    name, spec = (x.strip() for x in text.split("=", 1))
+    if not name:
+        raise CLIError(f"--param {text!r}: empty PATH")
+    try:
+        if ":" in spec:
+            parts = spec.split(":")
+            if len(parts) != 3:
+                raise ValueError
+            start, stop, num = float(parts[0]), float(parts[1]), int(parts[2])
+            if num < 1:
+                raise ValueError
+            values = list(np.linspace(start, stop, num))
+        else:
+            values = [float(v) for v in spec.split(",") if v.strip()]
+            if not values:
+                raise ValueError
+    except ValueError:
+        raise CLIError(
+            f"--param {text!r}: values must be START:STOP:NUM (NUM an integer >= 1) or numbers V1,V2,..."
+        ) from None
+    return name, [float(v) for v in values]
+
+
+def _set_path(data: dict, dotted: str, value):
+    """Set `value` at a dotted path (e.g. "forces.1.coefficient") in a deep-copied TOML dict."""
+    keys = dotted.split(".")
+    node = data
+    for i, key in enumerate(keys):
+        last = i == len(keys) - 1
+        where = ".".join(keys[: i + 1])
+        if isinstance(node, list):
+            if not key.isdigit() or int(key) >= len(node):
+                raise CLIError(
+                    f"--param {dotted}: {where}: index out of range (list of {len(node)})"
+                )
+            key = int(key)
+        elif isinstance(node, dict):
+            if not last and key not in node:
+                raise CLIError(f"--param {dotted}: {where}: no such table in the scene file")
+        else:
+            raise CLIError(
+                f"--param {dotted}: {'.'.join(keys[:i])} is a value, not a table or list"
+            )
+        if last:
+            old = node[key] if (isinstance(node, list) or key in node) else None
+            if isinstance(old, dict | list):
+                raise CLIError(f"--param {dotted}: {where} is a table or list, not a number")
+            node[key] = (
+                int(value)
+                if isinstance(old, int) and not isinstance(old, bool) and value == int(value)
+                else value
+            )
+        else:
+            node = node[key]
+
+
+def cmd_sweep(args) -> int:
+    import itertools
+
+    from tqdm.auto import tqdm
+
+    from ._scene_file import parse_scene
+
+    base, path = _load(args.scene)
+    if not args.param:
+        raise CLIError("sweep needs at least one -p/--param PATH=SPEC (see jaxrb sweep --help)")
+    params = [_parse_param(p) for p in args.param]
+    names = [n for n, _ in params]
+    if len(set(names)) != len(names):
+        raise CLIError("each --param PATH may be given once")
+    grid = list(itertools.product(*[v for _, v in params]))
+    outdir = Path(args.output)
+    _outputs_free(outdir, ["sweep.csv"], args.force)
+    # validate every grid point first: a bad value fails before any simulation runs
+    specs = []
+    for point in grid:
+        data = copy.deepcopy(base.data)
+        for name, value in zip(names, point, strict=True):
+            _set_path(data, name, value)
+        specs.append(
+            parse_scene(
+                data,
+                source=f"{path} with {', '.join(f'{n}={v:g}' for n, v in zip(names, point, strict=True))}",
+            )
+        )
+    rows = []
+    t0 = time.perf_counter()
+    bar = tqdm(specs, desc="jaxrb sweep", unit="run", disable=not args.progress, file=sys.stderr)
+    for point, spec in zip(grid, bar, strict=True):
+        traj = _simulate(spec, throw=False)
+        rows.append({**dict(zip(names, point, strict=True)), **_metrics(traj, spec.scene)})
+    wall = time.perf_counter() - t0
+    header = list(rows[0])
+    with open(outdir / "sweep.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=header)
+        w.writeheader()
+        for r in rows:
+            w.writerow(
+                {
+                    k: (f"{v:.10g}" if isinstance(v, float | np.floating) else v)
+                    for k, v in r.items()
+                }
+            )
+    show = names + ["result", "final_z", "final_speed", "energy_lost", "impacts", "steps"]
+    body = [
+        [_fmt(r[k], 5) if not isinstance(r[k], str) else r[k] for k in show]
+        for r in rows[: args.show]
+    ]
+    print(_table(body, header=show))
+    if len(rows) > args.show:
+        print(f"... {len(rows) - args.show} more rows in {outdir / 'sweep.csv'}")
+    failed = sum(r["result"] != "successful" for r in rows)
+    print(f"{len(rows)} runs in {wall:.2f} s ({failed} failed); results: {outdir / 'sweep.csv'}")
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------
+# bench
+
+
+def _benchmarks_dir() -> Path | None:
+    here = Path(__file__).resolve().parent.parent / "benchmarks"
+    for d in (Path.cwd() / "benchmarks", here):
+        if d.is_dir() and any(d.glob("*.py")):
+            return d
+    return None
+
+
+def cmd_bench(args) -> int:
+    import runpy
+
+    d = _benchmarks_dir()
+    if d is None:
+        raise CLIError("benchmarks/ not found: `jaxrb bench` runs from a source checkout of jaxrb")
+    for name in ("report.py", "run_all.py", "__main__.py"):
+        script = d / name
+        if script.exists():
+            break
+    else:
+        raise CLIError(f"no benchmark report script in {d} (expected report.py or run_all.py)")
+    old_argv, old_path = sys.argv, list(sys.path)
+    sys.argv = [str(script), *args.bench_args]
+    sys.path.insert(0, str(d.parent))
+    try:
+        runpy.run_path(str(script), run_name="__main__")
+    except SystemExit as e:
+        return int(e.code or 0) if not isinstance(e.code, str) else 1
+    finally:
+        sys.argv, sys.path[:] = old_argv, old_path
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------
+# parser
+
+
+def _add_common(p, output=True):
+    p.add_argument(
+        "scene",
+        nargs="?",
+        default=None,
+        metavar="SCENE.toml",
+        help="scene file (TOML); default: the built-in die-on-a-table scene",
+    )
+    if output:
+        p.add_argument(
+            "-o",
+            "--output",
+            default=DEFAULT_OUTPUT,
+            metavar="DIR",
+            help=f"output directory (default: {DEFAULT_OUTPUT}/)",
+        )
+        p.add_argument("-f", "--force", action="store_true", help="overwrite existing output files")
+    p.add_argument(
+        "--progress",
+        action=argparse.BooleanOptionalAction,
+        default=sys.stderr.isatty(),
+        help="show progress bars (default: on when stderr is a terminal)",
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    import jaxrb
+
+    parser = argparse.ArgumentParser(
+        prog="jaxrb",
+        description="jaxrb: JAX-accelerated, differentiable rigid-body dynamics. "
+        "Simulate a scene file, sweep parameters, benchmark.",
+        epilog="run `jaxrb COMMAND --help` for each command's options. "
+        "Frames: pos/vel world (z up), omega body, quaternions scalar first body->world.",
+    )
+    parser.add_argument("--version", action="version", version=f"jaxrb {jaxrb.__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    run = sub.add_parser(
+        "run",
+        help="simulate a scene file: trajectory (npz, CSV), plots, summary table",
+        description="Simulate one scene and write its trajectory, plots and a summary table.",
+        epilog=_EPILOG_RUN,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    _add_common(run)
+    run.add_argument(
+        "--t-end", type=float, default=None, metavar="T", help="override [simulation].t_end (s)"
+    )
+    run.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    run.add_argument(
+        "--animate", action="store_true", help="also write a 3D animation (animation.gif)"
+    )
+    run.add_argument("-q", "--quiet", action="store_true", help="print only the summary table")
+    run.add_argument(
+        "--show-default",
+        action="store_true",
+        help="print the annotated default scene file (the format reference) and exit",
+    )
+    run.set_defaults(func=cmd_run)
+
+    sweep = sub.add_parser(
+        "sweep",
+        help="run a batch over a parameter grid and write a results table",
+        description="Run the scene once per point of a parameter grid (Cartesian product of "
+        "the --param values) and write one results row per run.",
+        epilog=_EPILOG_SWEEP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    _add_common(sweep)
+    sweep.add_argument(
+        "-p",
+        "--param",
+        action="append",
+        default=[],
+        metavar="PATH=SPEC",
+        help="a grid parameter (repeatable), e.g. floor.restitution=0.2:0.8:4",
+    )
+    sweep.add_argument(
+        "--show", type=int, default=20, metavar="N", help="rows to print (default 20)"
+    )
+    sweep.set_defaults(func=cmd_sweep)
+
+    bench = sub.add_parser(
+        "bench",
+        help="run the benchmark report (from a source checkout)",
+        description="Run benchmarks/ (speed against error, against scipy and MuJoCo where "
+        "installed). Arguments after `bench` are passed to the report script.",
+    )
+    bench.add_argument(
+        "bench_args", nargs=argparse.REMAINDER, help="arguments for the benchmark report"
+    )
+    bench.set_defaults(func=cmd_bench)
+    return parser
+
+
+def main(argv=None) -> int:
+    """Entry point of the `jaxrb` console script (and `python -m jaxrb`); returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 2
+    if args.command == "run" and args.show_default:
+        from ._scene_file import default_scene_path
+
+        print(default_scene_path().read_text(encoding="utf-8"), end="")
+        return 0
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    from ._scene_file import SceneFileError
+
+    try:
+        return args.func(args)
+    except (CLIError, SceneFileError) as e:
+        print(f"jaxrb {args.command}: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

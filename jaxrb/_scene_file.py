@@ -1,0 +1,484 @@
+"""Scene files: a TOML description of a body, its forces, a floor or joint, and the run.
+
+`load_scene(path)` reads a file with `tomllib`, checks every field and returns a
+`SceneSpec` (the `Scene`, the initial `State`, the save times and the solver options).
+Every mistake raises a `SceneFileError` naming the file, the field and the problem, e.g.
+``scene.toml: [body].mass: must be > 0, got -1.0``.
+
+The format is documented, field by field, in the annotated example shipped with the package,
+`jaxrb/scenes/default.toml` (`default_scene_path()`). Sections:
+
+- `title`, `description`: optional strings.
+- `[body]`: `mass` (kg, required); `inertia` (kg m^2 about the mass centre, body axes: three
+  principal moments or a 3x3 tensor; optional when a shape is given); `[body.shape]` with
+  `type` = "box" (`half_extents`), "sphere" (`radius`) or "cylinder" (`radius`,
+  `half_height`).
+- `[initial]`: `pos`, `vel` (world frame, m and m/s), `omega` (BODY frame, rad/s) and the
+  attitude as one of `quat` (scalar first, body to world), `axis` + `angle_deg`, or
+  `euler_deg` + `sequence` (e.g. "313": R = R_a(phi1) R_b(phi2) R_c(phi3), moving axes).
+- `[[forces]]`: tables with `type` = "gravity" (`g`), "linear_drag" (`coefficient`),
+  "quadratic_drag" (`coefficient`, or `rho`, `drag_coefficient`, `area`), "damping_moment"
+  (`linear`, `quadratic`), "wrench" (`force`, `torque`, `point`, `frame`).
+- `[floor]`: `restitution` in [0, 1], `friction` >= 0, `height` (m).
+- `[joint]`: `type` = "pivot" or "hinge", `point` (body frame, m), `axis` (hinge).
+- `[simulation]`: `t_end` (s, required), `t_start`, `num_saves`, `rtol`, `atol`,
+  `max_steps`, `solver` ("tsit5", "dopri5", "dopri8").
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import importlib.resources
+import math
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "SceneFileError",
+    "SceneSpec",
+    "default_scene_path",
+    "load_scene",
+    "loads_scene",
+    "parse_scene",
+]
+
+
+class SceneFileError(ValueError):
+    """A scene file is invalid; the message names the file, the field and the problem."""
+
+
+@dataclasses.dataclass
+class SceneSpec:
+    """A parsed scene file.
+
+    **Fields:**
+
+    - `scene`: the `jaxrb.Scene`.
+    - `state0`: the initial `jaxrb.State` (world-frame pos/vel, body-frame omega, quaternion
+      scalar first body -> world).
+    - `ts`: save times (s), numpy array of shape (num_saves,).
+    - `options`: keyword arguments for `jaxrb.simulate` (`rtol`, `atol`, `max_steps`, `solver`).
+    - `title`, `description`: strings from the file (may be empty).
+    - `data`: the raw TOML dictionary (used by `jaxrb sweep` to override fields).
+    - `source`: the file name used in error messages.
+    """
+
+    scene: Any
+    state0: Any
+    ts: np.ndarray
+    options: dict
+    title: str
+    description: str
+    data: dict
+    source: str
+
+
+def default_scene_path() -> Path:
+    """Path of the annotated default scene shipped with jaxrb (a die thrown onto a table)."""
+    return Path(str(importlib.resources.files("jaxrb") / "scenes" / "default.toml"))
+
+
+def load_scene(path) -> SceneSpec:
+    """Read and validate a TOML scene file; raises `SceneFileError` naming field and problem."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SceneFileError(f"{path}: no such scene file") from None
+    except OSError as e:
+        raise SceneFileError(f"{path}: cannot read: {e}") from None
+    return loads_scene(text, source=str(path))
+
+
+def loads_scene(text: str, source: str = "<scene>") -> SceneSpec:
+    """Parse a scene from TOML text (see `load_scene`)."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise SceneFileError(f"{source}: not valid TOML: {e}") from None
+    return parse_scene(data, source=source)
+
+
+# ---------------------------------------------------------------------------------------------
+# typed field readers
+
+_MISSING = object()
+
+
+class _Table:
+    """A TOML table with its location (e.g. "[body]") for error messages."""
+
+    def __init__(self, data, where: str, source: str, known: tuple[str, ...]):
+        self.source = source
+        self.where = where
+        if not isinstance(data, dict):
+            self.fail(None, f"must be a table, got {_type_name(data)}")
+        self.data = data
+        for key in data:
+            if key not in known:
+                close = difflib.get_close_matches(key, known, n=1)
+                hint = f" (did you mean {close[0]!r}?)" if close else ""
+                allowed = ", ".join(known)
+                self.fail(key, f"unknown field{hint}; allowed here: {allowed}")
+
+    def fail(self, key, problem):
+        if key is None:
+            field = self.where
+        else:
+            field = f"{self.where}.{key}" if self.where else _TOP_NAMES.get(key, key)
+        raise SceneFileError(f"{self.source}: {field}: {problem}")
+
+    def has(self, key):
+        return key in self.data
+
+    def number(self, key, default=_MISSING, *, positive=False, nonnegative=False, lo=None, hi=None):
+        if key not in self.data:
+            if default is _MISSING:
+                self.fail(key, "missing required field")
+            return default
+        value = self.data[key]
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            self.fail(key, f"must be a number, got {_type_name(value)} {value!r}")
+        value = float(value)
+        if not math.isfinite(value):
+            self.fail(key, f"must be finite, got {value}")
+        if positive and value <= 0:
+            self.fail(key, f"must be > 0, got {value}")
+        if nonnegative and value < 0:
+            self.fail(key, f"must be >= 0, got {value}")
+        if lo is not None and hi is not None and not lo <= value <= hi:
+            self.fail(key, f"must be in [{lo}, {hi}], got {value}")
+        return value
+
+    def integer(self, key, default=_MISSING, *, minimum=None):
+        if key not in self.data:
+            if default is _MISSING:
+                self.fail(key, "missing required field")
+            return default
+        value = self.data[key]
+        if isinstance(value, bool) or not isinstance(value, int):
+            self.fail(key, f"must be an integer, got {_type_name(value)} {value!r}")
+        if minimum is not None and value < minimum:
+            self.fail(key, f"must be >= {minimum}, got {value}")
+        return value
+
+    def string(self, key, default=_MISSING, *, choices=None):
+        if key not in self.data:
+            if default is _MISSING:
+                self.fail(key, "missing required field")
+            return default
+        value = self.data[key]
+        if not isinstance(value, str):
+            self.fail(key, f"must be a string, got {_type_name(value)} {value!r}")
+        if choices is not None and value not in choices:
+            close = difflib.get_close_matches(value, choices, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            self.fail(key, f"unknown value {value!r}{hint}; choose one of: {', '.join(choices)}")
+        return value
+
+    def vector(self, key, n=3, default=_MISSING):
+        if key not in self.data:
+            if default is _MISSING:
+                self.fail(key, "missing required field")
+            return None if default is None else np.asarray(default, dtype=float)
+        value = self.data[key]
+        if not isinstance(value, list) or len(value) != n:
+            self.fail(key, f"must be a list of {n} numbers, got {_type_name(value)} {value!r}")
+        for i, x in enumerate(value):
+            if isinstance(x, bool) or not isinstance(x, int | float):
+                self.fail(key, f"element {i} must be a number, got {_type_name(x)} {x!r}")
+            if not math.isfinite(x):
+                self.fail(key, f"element {i} must be finite, got {x}")
+        return np.asarray(value, dtype=float)
+
+    def table(self, key, known, default=_MISSING):
+        if key not in self.data:
+            if default is _MISSING:
+                self.fail(key, "missing required table")
+            return default
+        return _Table(
+            self.data[key], f"{self.where}.{key}" if self.where else f"[{key}]", self.source, known
+        )
+
+
+def _type_name(value) -> str:
+    return {
+        bool: "a boolean",
+        int: "an integer",
+        float: "a number",
+        str: "a string",
+        list: "a list",
+        dict: "a table",
+    }.get(type(value), type(value).__name__)
+
+
+# ---------------------------------------------------------------------------------------------
+# sections
+
+_TOP_NAMES = {k: f"[{k}]" for k in ("body", "initial", "floor", "joint", "simulation")} | {
+    "forces": "[[forces]]"
+}
+_TOP = ("title", "description", "body", "initial", "forces", "floor", "joint", "simulation")
+_SOLVERS = ("tsit5", "dopri5", "dopri8")
+
+
+def _shape(body: _Table):
+    import jaxrb
+
+    if not body.has("shape"):
+        return None
+    raw = body.data["shape"]
+    kind = raw.get("type") if isinstance(raw, dict) else None
+    known = {
+        "box": ("type", "half_extents"),
+        "sphere": ("type", "radius"),
+        "cylinder": ("type", "radius", "half_height"),
+    }
+    t = _Table(
+        raw,
+        "[body.shape]",
+        body.source,
+        known.get(kind, tuple({k for v in known.values() for k in v})),
+    )
+    kind = t.string("type", choices=tuple(known))
+    if kind == "box":
+        half = t.vector("half_extents")
+        if np.any(half <= 0):
+            t.fail("half_extents", f"must all be > 0, got {half.tolist()}")
+        return jaxrb.Box(half)
+    if kind == "sphere":
+        return jaxrb.Sphere(t.number("radius", positive=True))
+    return jaxrb.Cylinder(t.number("radius", positive=True), t.number("half_height", positive=True))
+
+
+def _body(root: _Table):
+    import jaxrb
+
+    body = root.table("body", ("mass", "inertia", "shape"))
+    mass = body.number("mass", positive=True)
+    shape = _shape(body)
+    inertia = None
+    if body.has("inertia"):
+        raw = body.data["inertia"]
+        if isinstance(raw, list) and len(raw) == 3 and all(isinstance(r, list) for r in raw):
+            rows = [
+                _Table({"row": r}, "[body].inertia", body.source, ("row",)).vector("row")
+                for r in raw
+            ]
+            inertia = np.stack(rows)
+        else:
+            try:
+                inertia = body.vector("inertia")
+            except SceneFileError:
+                body.fail(
+                    "inertia", f"must be 3 principal moments or a 3x3 list of lists, got {raw!r}"
+                )
+    elif shape is None:
+        body.fail("inertia", "missing: give `inertia` or a [body.shape] to compute it from")
+    try:
+        return jaxrb.RigidBody(mass, inertia, shape=shape)
+    except ValueError as e:
+        body.fail("inertia", str(e))
+
+
+def _euler_quat(angles_rad, sequence):
+    import jax.numpy as jnp
+
+    import jaxrb
+
+    q = jnp.array([1.0, 0.0, 0.0, 0.0])
+    for axis_char, angle in zip(sequence, angles_rad, strict=True):
+        axis = jnp.zeros(3).at[int(axis_char) - 1].set(1.0)
+        q = jaxrb.quat_multiply(q, jaxrb.axis_angle_to_quat(axis, jnp.asarray(float(angle))))
+    return np.asarray(q)
+
+
+_SEQUENCES = ("121", "123", "131", "132", "212", "213", "231", "232", "312", "313", "321", "323")
+
+
+def _initial(root: _Table):
+    import jaxrb
+
+    init = root.table(
+        "initial",
+        ("pos", "vel", "omega", "quat", "axis", "angle_deg", "euler_deg", "sequence"),
+        default=None,
+    )
+    if init is None:
+        return jaxrb.make_state()
+    given = [k for k in ("quat", "axis", "euler_deg") if init.has(k)]
+    if len(given) > 1:
+        init.fail(given[1], f"give the attitude once: `{given[0]}` is already set")
+    quat = np.array([1.0, 0.0, 0.0, 0.0])
+    if init.has("quat"):
+        quat = init.vector("quat", 4)
+        norm = np.linalg.norm(quat)
+        if norm == 0:
+            init.fail("quat", "must not be zero")
+        quat = quat / norm
+    elif init.has("axis"):
+        axis = init.vector("axis")
+        if np.linalg.norm(axis) == 0:
+            init.fail("axis", "must not be the zero vector")
+        angle = math.radians(init.number("angle_deg"))
+        quat = np.asarray(jaxrb.axis_angle_to_quat(axis / np.linalg.norm(axis), angle))
+    elif init.has("euler_deg"):
+        angles = np.radians(init.vector("euler_deg"))
+        quat = _euler_quat(angles, init.string("sequence", choices=_SEQUENCES))
+    else:
+        for k in ("angle_deg", "sequence"):
+            if init.has(k):
+                init.fail(k, "given without `axis` / `euler_deg`")
+    return jaxrb.make_state(
+        pos=init.vector("pos", default=(0.0, 0.0, 0.0)),
+        quat=quat,
+        vel=init.vector("vel", default=(0.0, 0.0, 0.0)),
+        omega=init.vector("omega", default=(0.0, 0.0, 0.0)),
+    )
+
+
+_FORCES = {
+    "gravity": ("type", "g"),
+    "linear_drag": ("type", "coefficient"),
+    "quadratic_drag": ("type", "coefficient", "rho", "drag_coefficient", "area"),
+    "damping_moment": ("type", "linear", "quadratic"),
+    "wrench": ("type", "force", "torque", "point", "frame"),
+}
+
+
+def _force(raw, where, source):
+    import jaxrb
+
+    if not isinstance(raw, dict):
+        raise SceneFileError(f"{source}: {where}: must be a table, got {_type_name(raw)}")
+    if "type" not in raw:
+        raise SceneFileError(f"{source}: {where}.type: missing required field")
+    kind = raw["type"]
+    if not isinstance(kind, str) or kind not in _FORCES:
+        close = difflib.get_close_matches(str(kind), _FORCES, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise SceneFileError(
+            f"{source}: {where}.type: unknown force {kind!r}{hint}; choose one of: {', '.join(_FORCES)}"
+        )
+    f = _Table(raw, where, source, _FORCES[kind])
+    if kind == "gravity":
+        return jaxrb.Gravity(f.vector("g", default=(0.0, 0.0, -9.81)))
+    if kind == "linear_drag":
+        return jaxrb.LinearDrag(f.number("coefficient", nonnegative=True))
+    if kind == "quadratic_drag":
+        if f.has("coefficient"):
+            for k in ("rho", "drag_coefficient", "area"):
+                if f.has(k):
+                    f.fail(
+                        k,
+                        "give either `coefficient` or (`rho`, `drag_coefficient`, `area`), not both",
+                    )
+            return jaxrb.QuadraticDrag(f.number("coefficient", nonnegative=True))
+        if not f.has("area"):
+            f.fail(
+                "coefficient",
+                "missing: give `coefficient` (kg/m) or `area` (m^2) with `rho`, `drag_coefficient`",
+            )
+        return jaxrb.QuadraticDrag.from_air(
+            f.number("rho", 1.225, nonnegative=True),
+            f.number("drag_coefficient", 1.0, nonnegative=True),
+            f.number("area", nonnegative=True),
+        )
+    if kind == "damping_moment":
+        return jaxrb.DampingMoment(
+            f.number("linear", 0.0, nonnegative=True), f.number("quadratic", 0.0, nonnegative=True)
+        )
+    return jaxrb.Wrench(
+        force=f.vector("force", default=None),
+        torque=f.vector("torque", default=None),
+        point=f.vector("point", default=None),
+        frame=f.string("frame", "world", choices=("world", "body")),
+    )
+
+
+def _forces(root: _Table):
+    raw = root.data.get("forces", [])
+    if not isinstance(raw, list):
+        root.fail("forces", "must be an array of tables, written [[forces]]")
+    return tuple(_force(item, f"[[forces]][{i}]", root.source) for i, item in enumerate(raw))
+
+
+def _floor(root: _Table):
+    import jaxrb
+
+    floor = root.table("floor", ("restitution", "friction", "height"), default=None)
+    if floor is None:
+        return None
+    return jaxrb.Floor(
+        floor.number("restitution", lo=0.0, hi=1.0),
+        floor.number("friction", 0.0, nonnegative=True),
+        floor.number("height", 0.0),
+    )
+
+
+def _joint(root: _Table):
+    import jaxrb
+
+    joint = root.table("joint", ("type", "point", "axis"), default=None)
+    if joint is None:
+        return None
+    kind = joint.string("type", choices=("pivot", "hinge"))
+    point = joint.vector("point", default=(0.0, 0.0, 0.0))
+    if kind == "pivot":
+        if joint.has("axis"):
+            joint.fail("axis", 'a pivot has no axis (use type = "hinge")')
+        return jaxrb.Pivot(point)
+    axis = joint.vector("axis")
+    if np.linalg.norm(axis) == 0:
+        joint.fail("axis", "must not be the zero vector")
+    return jaxrb.Hinge(point, axis)
+
+
+def _simulation(root: _Table):
+    sim = root.table(
+        "simulation", ("t_start", "t_end", "num_saves", "rtol", "atol", "max_steps", "solver")
+    )
+    t0 = sim.number("t_start", 0.0)
+    t1 = sim.number("t_end")
+    if t1 <= t0:
+        sim.fail("t_end", f"must be greater than t_start = {t0}, got {t1}")
+    n = sim.integer("num_saves", 201, minimum=2)
+    options = {
+        "rtol": sim.number("rtol", 1e-6, positive=True),
+        "atol": sim.number("atol", 1e-6, positive=True),
+        "max_steps": sim.integer("max_steps", 100_000, minimum=1),
+        "solver": sim.string("solver", "tsit5", choices=_SOLVERS),
+    }
+    return np.linspace(t0, t1, n), options
+
+
+def parse_scene(data: dict, source: str = "<scene>") -> SceneSpec:
+    """Build a `SceneSpec` from an already-parsed TOML dictionary (see `load_scene`)."""
+    import jaxrb
+
+    root = _Table(data, "", source, _TOP)
+    title = root.string("title", "")
+    description = root.string("description", "")
+    body = _body(root)
+    forces = _forces(root)
+    floor = _floor(root)
+    joint = _joint(root)
+    if floor is not None and joint is not None:
+        root.fail("joint", "a scene may have a [floor] or a [joint], not both")
+    if floor is not None and body.shape is None:
+        root.fail("floor", "a scene with a floor needs a [body.shape] to find the contact point")
+    state0 = _initial(root)
+    ts, options = _simulation(root)
+    scene = jaxrb.Scene(body, forces=forces, floor=floor, joint=joint)
+    return SceneSpec(scene, state0, ts, options, title, description, data, source)
+
+
+def make_solver(name: str):
+    """The diffrax solver for a scene file's `solver` name."""
+    import diffrax as dfx
+
+    return {"tsit5": dfx.Tsit5, "dopri5": dfx.Dopri5, "dopri8": dfx.Dopri8}[name]()

@@ -1,0 +1,177 @@
+"""Scene files: the default scene parses; each kind of mistake gives one clear error."""
+
+import numpy as np
+import pytest
+
+import jaxrb
+from jaxrb._scene_file import SceneFileError, default_scene_path, load_scene, loads_scene
+
+B = "[body]\nmass = 1.0\ninertia = [1, 2, 3]\n"
+S = "[simulation]\nt_end = 1.0\n"
+MINIMAL = """
+[body]
+mass = 2.0
+inertia = [1.0, 2.0, 3.0]
+[simulation]
+t_end = 1.0
+"""
+
+
+def test_default_scene_parses():
+    spec = load_scene(default_scene_path())
+    scene = spec.scene
+    assert isinstance(scene.body.shape, jaxrb.Box)
+    np.testing.assert_allclose(scene.body.shape.half_extents, 0.008)
+    assert float(scene.body.mass) == 0.0045
+    assert [type(f) for f in scene.forces] == [
+        jaxrb.Gravity,
+        jaxrb.QuadraticDrag,
+        jaxrb.DampingMoment,
+    ]
+    np.testing.assert_allclose(scene.forces[1].coefficient, 0.5 * 1.225 * 1.05 * 2.56e-4)
+    assert float(scene.floor.restitution) == 0.5 and float(scene.floor.friction) == 0.3
+    assert spec.ts[0] == 0.0 and spec.ts[-1] == 0.6 and spec.ts.size == 241
+    np.testing.assert_allclose(np.linalg.norm(spec.state0.quat), 1.0, rtol=1e-12)
+    np.testing.assert_allclose(spec.state0.omega, [18.0, -11.0, 7.0])
+    assert spec.options == {"rtol": 1e-6, "atol": 1e-6, "max_steps": 100000, "solver": "tsit5"}
+
+
+def test_minimal_defaults():
+    spec = loads_scene(MINIMAL)
+    assert spec.scene.body.principal
+    np.testing.assert_allclose(spec.scene.body.inertia, [1.0, 2.0, 3.0])
+    assert spec.scene.forces == () and spec.scene.floor is None and spec.scene.joint is None
+    np.testing.assert_allclose(spec.state0.quat, [1.0, 0.0, 0.0, 0.0])
+    assert spec.ts.size == 201
+
+
+def test_attitude_forms_agree():
+    """axis + angle_deg, euler_deg + sequence and quat give the same attitude."""
+    base = MINIMAL + "[initial]\n"
+    q_axis = loads_scene(base + "axis = [0, 0, 2]\nangle_deg = 90\n").state0.quat
+    q_euler = loads_scene(base + 'euler_deg = [90, 0, 0]\nsequence = "321"\n').state0.quat
+    q_quat = loads_scene(
+        base + f"quat = [{np.cos(np.pi / 4)}, 0, 0, {np.sin(np.pi / 4)}]\n"
+    ).state0.quat
+    np.testing.assert_allclose(q_axis, q_quat, atol=1e-15)
+    np.testing.assert_allclose(q_euler, q_quat, atol=1e-15)
+    # "313" (psi, theta, phi) = R3(psi) R1(theta) R3(phi)
+    q = loads_scene(base + 'euler_deg = [30, 40, 50]\nsequence = "313"\n').state0.quat
+    R = np.asarray(jaxrb.quat_to_matrix(q))
+
+    def rot(axis, deg):
+        c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+        if axis == 1:
+            return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
+        return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+    np.testing.assert_allclose(R, rot(3, 30) @ rot(1, 40) @ rot(3, 50), atol=1e-14)
+
+
+def test_full_inertia_tensor_and_joint():
+    spec = loads_scene(
+        """
+[body]
+mass = 7.5
+inertia = [[0.1, -0.01, 0.0], [-0.01, 0.2, 0.0], [0.0, 0.0, 0.25]]
+[joint]
+type = "hinge"
+point = [0.25, 0, 0]
+axis = [0, 1, 0]
+[simulation]
+t_end = 0.5
+num_saves = 11
+"""
+    )
+    assert not spec.scene.body.principal
+    assert isinstance(spec.scene.joint, jaxrb.Hinge)
+    np.testing.assert_allclose(spec.scene.joint.axis, [0.0, 1.0, 0.0])
+
+
+@pytest.mark.parametrize(
+    "text, field, problem",
+    [
+        # missing field
+        (
+            "[body]\ninertia = [1, 2, 3]\n" + S,
+            "[body].mass",
+            "missing required field",
+        ),
+        (B + "", "[simulation]", "missing required table"),
+        # wrong type
+        (
+            '[body]\nmass = "heavy"\ninertia = [1, 2, 3]\n[simulation]\nt_end = 1.0\n',
+            "[body].mass",
+            "must be a number, got a string",
+        ),
+        (
+            B + "[initial]\nomega = [1, 2]\n" + S,
+            "[initial].omega",
+            "must be a list of 3 numbers",
+        ),
+        (
+            B + "[simulation]\nt_end = 1.0\nnum_saves = 10.5\n",
+            "[simulation].num_saves",
+            "must be an integer",
+        ),
+        # unknown force
+        (
+            '[body]\nmass = 1.0\ninertia = [1, 2, 3]\n[[forces]]\ntype = "gravty"\n[simulation]\nt_end = 1.0\n',
+            "[[forces]][0].type",
+            "unknown force 'gravty' (did you mean 'gravity'?)",
+        ),
+        # negative mass
+        (
+            "[body]\nmass = -1.0\ninertia = [1, 2, 3]\n" + S,
+            "[body].mass",
+            "must be > 0, got -1.0",
+        ),
+        # other impossible values
+        (
+            B + "[floor]\nrestitution = 1.5\n" + S,
+            "[floor].restitution",
+            "must be in [0.0, 1.0], got 1.5",
+        ),
+        (
+            "[body]\nmass = 1.0\ninertia = [1, 1, 3]\n" + S,
+            "[body].inertia",
+            "triangle",
+        ),
+        (
+            B + "[simulation]\nt_end = -1.0\n",
+            "[simulation].t_end",
+            "must be greater than t_start",
+        ),
+        # unknown field (typo)
+        (
+            B + "shpe = 1\n" + S,
+            "[body].shpe",
+            "unknown field (did you mean 'shape'?)",
+        ),
+        (
+            '[body]\nmass = 1.0\ninertia = [1, 2, 3]\n[[forces]]\ntype = "linear_drag"\nk = 1.0\n'
+            "" + S,
+            "[[forces]][0].k",
+            "unknown field",
+        ),
+        # a floor needs a shape
+        (
+            B + "[floor]\nrestitution = 0.5\n" + S,
+            "[floor]",
+            "needs a [body.shape]",
+        ),
+    ],
+)
+def test_invalid_files_name_field_and_problem(text, field, problem):
+    with pytest.raises(SceneFileError) as info:
+        loads_scene(text, source="bad.toml")
+    message = str(info.value)
+    assert message.startswith(f"bad.toml: {field}: "), message
+    assert problem in message, message
+
+
+def test_not_toml_and_missing_file(tmp_path):
+    with pytest.raises(SceneFileError, match="not valid TOML"):
+        loads_scene("[body\nmass = 1")
+    with pytest.raises(SceneFileError, match="no such scene file"):
+        load_scene(tmp_path / "nope.toml")
