@@ -7,14 +7,10 @@ about its fixed point instead (see `_joints.py`).
 
 import jax.numpy as jnp
 
-from ._quaternion import quat_multiply, quat_normalize
+from ._quaternion import quat_normalize
+from ._rates import quat_rate
 from ._rotational import angular_acceleration
 from ._state import State
-
-
-def _quat_rate(quat, omega):
-    """q_dot = 1/2 q (x) (0, w_body)."""
-    return 0.5 * quat_multiply(quat, jnp.concatenate([jnp.zeros_like(omega[..., :1]), omega], -1))
 
 
 def total_wrench(t, state: State, scene):
@@ -52,7 +48,7 @@ def vector_field(t, state: State, scene) -> State:
     """
     unit = State(state.pos, quat_normalize(state.quat), state.vel, state.omega)
     acc, omega_dot = accelerations(t, unit, scene)
-    return State(pos=state.vel, quat=_quat_rate(state.quat, state.omega), vel=acc, omega=omega_dot)
+    return State(pos=state.vel, quat=quat_rate(state.quat, state.omega), vel=acc, omega=omega_dot)
 
 
 def joint_reaction(scene, t, state: State):
