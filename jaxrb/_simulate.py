@@ -115,6 +115,8 @@ def simulate(
     adjoint: dfx.AbstractAdjoint | None = None,
     progress_meter: dfx.AbstractProgressMeter | None = None,
     throw: bool = True,
+    max_impacts: int = 64,
+    rest_speed: float = 1e-2,
 ) -> Trajectory:
     """Integrate `scene` from `state0` at time `ts[0]` and save at the times `ts`.
 
@@ -138,6 +140,10 @@ def simulate(
     - `progress_meter`: e.g. `diffrax.TqdmProgressMeter()` for long runs.
     - `throw`: if True (default) raise on bad input or solver failure; if False, return a
       per-trajectory `result` code instead (use this under `jax.vmap`).
+    - `max_impacts`: scenes with a floor only: the static bound on the number of impacts
+      (the size of `Trajectory.impacts`); reaching it gives `RESULTS.max_impacts_reached`.
+    - `rest_speed`: scenes with a floor only: outgoing normal speed (m/s) below which the
+      remaining bounces are merged into resting contact (see `jaxrb/_impacts.py`).
 
     **Returns:** a `Trajectory` with full `State`s at `ts`.
 
@@ -169,7 +175,7 @@ def simulate(
             max_steps=max_steps,
             stepsize_controller=stepsize_controller,
             adjoint=adjoint,
-            throw=throw,
+            throw=throw, max_impacts=max_impacts, rest_speed=rest_speed,
         )
     if solver is None:
         solver = dfx.Tsit5()

@@ -1,0 +1,382 @@
+# ruff: noqa: B023, E501  (closures are called inside their loop iteration; table strings)
+"""B1: torque-free asymmetric body, I = (1, 2, 3), omega0 = (a, 0, c), a ~ U(0.5, 1.5),
+c ~ U(1, 2), q0 = identity, T = 20, batch N.
+
+Error = worst body's max(|omega(T) - exact| / |omega0|, geodesic angle of q(T) vs reference);
+exact omega from `jaxrb.analytic.asymmetric_top` (Jacobi elliptic functions), reference attitude
+from `jaxrb.simulate` with diffrax Dopri8 at rtol = atol = 1e-13 in float64 (cross-checked
+against the exact flow `jaxrb.torque_free_flow` when present).
+
+Run: python -m benchmarks.b1_torque_free --n 1000 --dtype both --out bench_out
+"""
+
+import argparse
+import math
+import os
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import diffrax as dfx  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+
+import jaxrb  # noqa: E402
+from jaxrb._batched import simulate_batch  # noqa: E402
+from jaxrb.analytic import asymmetric_top  # noqa: E402
+
+try:
+    from . import _common as C
+except ImportError:  # run as a script
+    import _common as C  # type: ignore
+
+T_END = 20.0
+INERTIA = (1.0, 2.0, 3.0)
+
+
+def initial_omegas(n, seed=0):
+    k1, k2 = jax.random.split(jax.random.key(seed))
+    a = jax.random.uniform(k1, (n,), minval=0.5, maxval=1.5, dtype=jnp.float64)
+    c = jax.random.uniform(k2, (n,), minval=1.0, maxval=2.0, dtype=jnp.float64)
+    return jnp.stack([a, jnp.zeros(n), c], -1)
+
+
+def scene_for(dtype):
+    return jaxrb.Scene(jaxrb.RigidBody(jnp.asarray(1.0, dtype), jnp.asarray(INERTIA, dtype)))
+
+
+def make_errors(omega0):
+    """Error function for results (omega_T (N,3), quat_T (N,4)) in any dtype."""
+    inertia = jnp.asarray(INERTIA)
+    w_exact = jax.vmap(lambda w: asymmetric_top(T_END, inertia, w))(omega0)
+    ref = jax.jit(
+        jax.vmap(
+            lambda w: jaxrb.simulate(
+                scene_for(jnp.float64),
+                jaxrb.make_state(omega=w),
+                jnp.array([0.0, T_END]),
+                solver=dfx.Dopri8(),
+                rtol=1e-13,
+                atol=1e-13,
+                throw=False,
+            ).states.quat[-1]
+        )
+    )(omega0)
+    w0n = jnp.linalg.norm(omega0, axis=-1)
+
+    def error(omega_T, quat_T):
+        omega_T = jnp.asarray(omega_T, jnp.float64)
+        quat_T = jnp.asarray(quat_T, jnp.float64)
+        quat_T = quat_T / jnp.linalg.norm(quat_T, axis=-1, keepdims=True)
+        e_w = jnp.linalg.norm(omega_T - w_exact, axis=-1) / w0n
+        e_q = jaxrb.quat_geodesic_angle(quat_T, ref)
+        return float(jnp.max(jnp.maximum(e_w, e_q)))
+
+    return error, w_exact, ref
+
+
+def rk4_fixed(scene, n_steps):
+    """A fixed-step RK4 written directly in jnp, vmapped: the FINDINGS baseline."""
+    h = T_END / n_steps
+
+    def one(state):
+        f = lambda y: jaxrb.vector_field(0.0, y, scene)  # noqa: E731
+        ax = lambda y, k, c: jax.tree.map(lambda a, b: a + c * b, y, k)  # noqa: E731
+
+        def step(_, y):
+            k1 = f(y)
+            k2 = f(ax(y, k1, 0.5 * h))
+            k3 = f(ax(y, k2, 0.5 * h))
+            k4 = f(ax(y, k3, h))
+            return jax.tree.map(
+                lambda y_, a, b, c, d: y_ + (h / 6) * (a + 2 * b + 2 * c + d), y, k1, k2, k3, k4
+            )
+
+        return jax.lax.fori_loop(0, n_steps, step, state)
+
+    return jax.jit(jax.vmap(one))
+
+
+def run(n=1000, dtypes=("float64", "float32"), n_python=10, quick=False, scaling=True):
+    rows: list[C.Row] = []
+    omega0 = initial_omegas(n)
+    error, w_exact, ref = make_errors(omega0)
+    ts64 = jnp.array([0.0, T_END])
+
+    for dname in dtypes:
+        dt = jnp.float64 if dname == "float64" else jnp.float32
+        scene = scene_for(dt)
+        states0 = jaxrb.make_state(omega=omega0.astype(dt))
+        ts = ts64.astype(dt)
+        # lean batched DOP853
+        tols = [1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11] if dname == "float64" else [1e-4, 1e-5, 1e-6]
+        if quick:
+            tols = tols[1::2]
+        lean = jax.jit(lambda s, tol: simulate_batch(scene, s, ts, rtol=tol, atol=tol, throw=False))
+        for tol in tols:  # tolerance is a traced argument: one compilation for the sweep
+            first, best, tr = C.time_jax(lean, states0, jnp.asarray(tol, dt))
+            rows.append(
+                C.Row(
+                    "B1",
+                    "jaxrb lean DOP853 (simulate_batch)",
+                    dname,
+                    f"tol {tol:.0e}",
+                    n,
+                    error(tr.states.omega[:, -1], tr.states.quat[:, -1]),
+                    best / n * 1e6,
+                    first - best,
+                    float(tr.num_steps[0]),
+                )
+            )
+        # plain vmap of diffrax Dopri8 through jaxrb.simulate
+        tols = [1e-7, 1e-8, 1e-9, 1e-10] if dname == "float64" else [1e-5, 1e-6]
+        if quick:
+            tols = tols[1::2]
+        fn = jax.jit(
+            jax.vmap(
+                lambda s, tol: jaxrb.simulate(
+                    scene, s, ts, solver=dfx.Dopri8(), rtol=tol, atol=tol, throw=False
+                ),
+                in_axes=(0, None),
+            )
+        )
+        for tol in tols:
+            first, best, tr = C.time_jax(fn, states0, jnp.asarray(tol, dt))
+            rows.append(
+                C.Row(
+                    "B1",
+                    "diffrax Dopri8, vmap(jaxrb.simulate)",
+                    dname,
+                    f"tol {tol:.0e}",
+                    n,
+                    error(tr.states.omega[:, -1], tr.states.quat[:, -1]),
+                    best / n * 1e6,
+                    first - best,
+                    float(jnp.mean(tr.num_steps)),
+                )
+            )
+        # fixed-step jnp RK4
+        for n_steps in [250, 500, 1000, 2000] if not quick else [500, 2000]:
+            fn = rk4_fixed(scene, n_steps)
+            first, best, out = C.time_jax(fn, states0)
+            rows.append(
+                C.Row(
+                    "B1",
+                    "jnp RK4 fixed step, vmap",
+                    dname,
+                    f"h {T_END / n_steps:.3g}",
+                    n,
+                    error(out.omega, out.quat),
+                    best / n * 1e6,
+                    first - best,
+                    float(n_steps),
+                )
+            )
+        # exact flow (if available)
+        if hasattr(jaxrb, "torque_free_flow") or _has_exact_flow():
+            from jaxrb._exact_flow import torque_free_flow
+
+            fn = jax.jit(lambda s: torque_free_flow(jnp.asarray(INERTIA, dt), s, T_END))
+            first, best, out = C.time_jax(fn, states0)
+            rows.append(
+                C.Row(
+                    "B1",
+                    "jaxrb exact flow (torque_free_flow)",
+                    dname,
+                    "-",
+                    n,
+                    error(out.omega, out.quat),
+                    best / n * 1e6,
+                    first - best,
+                    math.nan,
+                    "no time stepping",
+                )
+            )
+
+    # scipy peers (float64, a subset of bodies, per-body Python loop)
+    rows += scipy_rows(omega0[:n_python], w_exact[:n_python], ref[:n_python], quick)
+    rows += mujoco_rows(omega0, error, quick)
+    scale_pts = scaling_points(quick) if scaling else []
+    return rows, scale_pts
+
+
+def _has_exact_flow():
+    try:
+        import jaxrb._exact_flow  # noqa: F401
+
+        return True
+    except ImportError:
+        return False
+
+
+def scipy_rows(omega0, w_exact, ref, quick):
+    from scipy.integrate import solve_ivp
+
+    J = np.asarray(INERTIA)
+
+    def rhs(t, y):
+        q, w = y[:4], y[4:7]
+        dw = -np.cross(w, J * w) / J
+        q0, q1, q2, q3 = q
+        w1, w2, w3 = w
+        dq = 0.5 * np.array(
+            [
+                -q1 * w1 - q2 * w2 - q3 * w3,
+                q0 * w1 + q2 * w3 - q3 * w2,
+                q0 * w2 - q1 * w3 + q3 * w1,
+                q0 * w3 + q1 * w2 - q2 * w1,
+            ]
+        )
+        return np.concatenate([dq, dw, y[10:13], np.zeros(3)])  # translation: pos, vel
+
+    rows = []
+    n = omega0.shape[0]
+    w0 = np.asarray(omega0)
+    for method, tols in (("DOP853", [1e-7, 1e-9, 1e-11]), ("RK45", [1e-7, 1e-9])):
+        for tol in tols if not quick else tols[:1]:
+
+            def loop():
+                outs, steps = [], 0
+                for i in range(n):
+                    y0 = np.concatenate([[1.0, 0, 0, 0], w0[i], np.zeros(6)])
+                    sol = solve_ivp(rhs, (0, T_END), y0, method=method, rtol=tol, atol=tol)
+                    outs.append(sol.y[:, -1])
+                    steps += sol.t.size - 1
+                return np.array(outs), steps / n
+
+            sec, (out, steps) = C.time_python(loop)
+            q = out[:, :4] / np.linalg.norm(out[:, :4], axis=-1, keepdims=True)
+            e_w = np.linalg.norm(out[:, 4:7] - np.asarray(w_exact), axis=-1) / np.linalg.norm(
+                w0, axis=-1
+            )
+            e_q = np.asarray(jaxrb.quat_geodesic_angle(jnp.asarray(q), ref))
+            rows.append(
+                C.Row(
+                    "B1",
+                    f"scipy solve_ivp {method} (loop)",
+                    "float64",
+                    f"tol {tol:.0e}",
+                    n,
+                    float(np.max(np.maximum(e_w, e_q))),
+                    sec / n * 1e6,
+                    math.nan,
+                    steps,
+                )
+            )
+    return rows
+
+
+def mujoco_rows(omega0, error, quick):
+    try:
+        import mujoco
+    except ImportError:
+        return [
+            C.Row(
+                "B1",
+                "MuJoCo C (not installed: pip install jaxrb[bench])",
+                "float64",
+                "-",
+                0,
+                math.nan,
+                math.nan,
+                math.nan,
+            )
+        ]
+    n = omega0.shape[0]
+    rows = []
+    for h in [0.02, 0.01, 0.005, 0.0025] if not quick else [0.01]:
+        xml = (
+            f"<mujoco><option gravity='0 0 0' integrator='RK4' timestep='{h}'/><worldbody>"
+            + "".join(
+                f"<body><freejoint/><inertial pos='0 0 0' mass='1' diaginertia='{INERTIA[0]} "
+                f"{INERTIA[1]} {INERTIA[2]}'/></body>"
+                for _ in range(n)
+            )
+            + "</worldbody></mujoco>"
+        )
+        model = mujoco.MjModel.from_xml_string(xml)
+        data = mujoco.MjData(model)
+        n_steps = int(round(T_END / h))
+
+        def go():
+            mujoco.mj_resetData(model, data)
+            qvel = np.zeros((n, 6))
+            qvel[:, 3:] = np.asarray(omega0)  # free-joint angular velocity: body (local) frame
+            data.qvel[:] = qvel.ravel()
+            for _ in range(n_steps):
+                mujoco.mj_step(model, data)
+            return data.qpos.reshape(n, 7).copy(), data.qvel.reshape(n, 6).copy()
+
+        sec, (qpos, qvel) = C.time_python(go)
+        rows.append(
+            C.Row(
+                "B1",
+                "MuJoCo C RK4, N bodies in one scene",
+                "float64",
+                f"h {h:g}",
+                n,
+                error(qvel[:, 3:], qpos[:, 3:]),
+                sec / n * 1e6,
+                math.nan,
+                float(n_steps),
+                f"mujoco {mujoco.__version__}",
+            )
+        )
+    return rows
+
+
+def scaling_points(quick):
+    """us/body vs N for the lean path (tol 1e-10) and vmapped Dopri8 (tol 1e-9), float64."""
+    pts = []
+    scene = scene_for(jnp.float64)
+    ts = jnp.array([0.0, T_END])
+    sizes = [100, 1000, 10000] if not quick else [100, 1000]
+    for n in sizes:
+        s = jaxrb.make_state(omega=initial_omegas(n, seed=1))
+        f_lean = jax.jit(
+            lambda s: simulate_batch(scene, s, ts, rtol=1e-10, atol=1e-10, throw=False)
+        )
+        _, best, _ = C.time_jax(f_lean, s, repeats=2)
+        pts.append(("jaxrb lean DOP853 tol 1e-10", n, best / n * 1e6))
+        f_dfx = jax.jit(
+            jax.vmap(
+                lambda s: jaxrb.simulate(
+                    scene, s, ts, solver=dfx.Dopri8(), rtol=1e-9, atol=1e-9, throw=False
+                )
+            )
+        )
+        _, best, _ = C.time_jax(f_dfx, s, repeats=2)
+        pts.append(("diffrax Dopri8 vmap tol 1e-9", n, best / n * 1e6))
+    return pts
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--n", type=int, default=1000)
+    p.add_argument("--dtype", choices=["float64", "float32", "both"], default="both")
+    p.add_argument("--out", default=None, help="directory for the markdown table and PNGs")
+    p.add_argument("--quick", action="store_true", help="fewer settings (smoke run)")
+    p.add_argument("--no-scaling", action="store_true")
+    a = p.parse_args(argv)
+    dtypes = ("float64", "float32") if a.dtype == "both" else (a.dtype,)
+    rows, pts = run(a.n, dtypes, quick=a.quick, scaling=not a.no_scaling)
+    dev = C.device_name()
+    table = C.markdown_table(rows, dev)
+    print(table)
+    for m, n, t in pts:
+        print(f"scaling: {m:35s} N={n:6d} {t:9.2f} us/body")
+    if a.out:
+        os.makedirs(a.out, exist_ok=True)
+        with open(os.path.join(a.out, "b1.md"), "w") as f:
+            f.write("## B1 torque-free asymmetric body\n\n" + table)
+        C.plot_work_precision(
+            rows, f"B1 torque-free, N={a.n}, {dev}", os.path.join(a.out, "b1.png")
+        )
+        if pts:
+            C.plot_scaling(pts, f"B1 batch scaling, {dev}", os.path.join(a.out, "b1_scaling.png"))
+    return rows, pts
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,187 @@
+"""Fast paths: the lean batched DOP853 (`simulate_batch`) and the exact torque-free flow."""
+
+import diffrax as dfx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxrb
+from jaxrb._batched import simulate_batch
+from jaxrb._exact_flow import torque_free_flow
+from jaxrb.analytic import asymmetric_top
+
+INERTIA = jnp.array([1.0, 2.0, 3.0])
+
+
+def _random_states(n, seed=0, spin=1.0):
+    rng = np.random.default_rng(seed)
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
+    return jaxrb.make_state(
+        pos=rng.normal(size=(n, 3)),
+        quat=q,
+        vel=rng.normal(size=(n, 3)),
+        omega=spin * rng.normal(size=(n, 3)),
+    )
+
+
+@pytest.fixture(scope="module")
+def batch():
+    return _random_states(6)
+
+
+@pytest.fixture(scope="module")
+def reference(batch):
+    """diffrax Dopri8 at rtol = atol = 1e-13 through `jaxrb.simulate` (independent path)."""
+    ts = jnp.array([0.0, 2.5, 10.0])
+    scene = jaxrb.Scene(jaxrb.RigidBody(1.0, INERTIA))
+    run = jax.vmap(
+        lambda s: jaxrb.simulate(scene, s, ts, solver=dfx.Dopri8(), rtol=1e-13, atol=1e-13).states
+    )
+    return ts, run(batch)
+
+
+def test_simulate_batch_torque_free_exact(batch, reference):
+    ts, ref = reference
+    scene = jaxrb.Scene(jaxrb.RigidBody(1.0, INERTIA))
+    traj = simulate_batch(scene, batch, ts, rtol=1e-11, atol=1e-11)
+    assert traj.states.quat.shape == (6, 3, 4)
+    assert traj.states.omega.shape == (6, 3, 3)
+    w_exact = jax.vmap(lambda w: asymmetric_top(ts, INERTIA, w))(batch.omega)
+    assert float(jnp.max(jnp.abs(traj.states.omega - w_exact))) < 1e-9
+    assert float(jnp.max(jaxrb.quat_geodesic_angle(traj.states.quat, ref.quat))) < 1e-9
+    np.testing.assert_allclose(traj.states.pos, ref.pos, atol=1e-9)
+    np.testing.assert_allclose(traj.states.vel, ref.vel, atol=1e-12)
+    assert bool(jnp.all(traj.result == jaxrb.RESULTS.successful))
+    assert float(jnp.max(traj.quat_norm_drift)) < 1e-9
+
+
+def test_simulate_batch_error_tracks_tolerance(batch):
+    """Work-precision: tighter tolerance -> smaller error, more steps (8th order)."""
+    ts = jnp.array([0.0, 5.0, 10.0])
+    scene = jaxrb.Scene(jaxrb.RigidBody(1.0, INERTIA))
+    w_exact = jax.vmap(lambda w: asymmetric_top(10.0, INERTIA, w))(batch.omega)
+    errs, steps = [], []
+    for tol in (1e-6, 1e-9):
+        traj = simulate_batch(scene, batch, ts, rtol=tol, atol=tol)
+        errs.append(float(jnp.max(jnp.abs(traj.states.omega[:, -1] - w_exact))))
+        steps.append(int(traj.num_steps[0]))
+    assert errs[1] < 1e-2 * errs[0]
+    assert errs[0] < 1e-4 and errs[1] < 1e-7
+    assert steps[1] > steps[0]
+    # 8th order: 1000x smaller error for about 1000^(1/8) = 2.4x more steps (allow 1.5 - 4)
+    assert 1.5 < steps[1] / steps[0] < 4.0
+
+
+def test_simulate_batch_heavy_top_matches_simulate():
+    """A jointed scene (pivot + gravity): same coordinates and right-hand side as `simulate`."""
+    body = jaxrb.RigidBody(1.0, jnp.array([0.5, 0.5, 0.2]))
+    scene = jaxrb.Scene(body, forces=(jaxrb.Gravity(),), joint=jaxrb.Pivot((0.0, 0.0, -0.5)))
+    states = jaxrb.make_state(
+        quat=jaxrb.axis_angle_to_quat(jnp.array([1.0, 0.0, 0.0]), jnp.array([0.3, 0.5, 0.7])),
+        omega=jnp.array([[0.0, 0.0, 20.0], [0.1, 0.0, 15.0], [0.0, 0.2, 25.0]]),
+    )
+    ts = jnp.linspace(0.0, 1.0, 5)
+    traj = simulate_batch(scene, states, ts, rtol=1e-11, atol=1e-11)
+    ref = jax.vmap(
+        lambda s: jaxrb.simulate(scene, s, ts, solver=dfx.Dopri8(), rtol=1e-12, atol=1e-12).states
+    )(states)
+    assert float(jnp.max(jaxrb.quat_geodesic_angle(traj.states.quat, ref.quat))) < 1e-8
+    np.testing.assert_allclose(traj.states.omega, ref.omega, atol=1e-7)
+    np.testing.assert_allclose(traj.states.pos, ref.pos, atol=1e-9)
+    e = jax.vmap(jax.vmap(lambda s: jaxrb.energy(scene, s)))(traj.states)
+    assert float(jnp.max(jnp.abs(e - e[:, :1]))) < 1e-8
+
+
+def test_simulate_batch_float32(batch):
+    scene = jaxrb.Scene(jaxrb.RigidBody(jnp.float32(1.0), INERTIA.astype(jnp.float32)))
+    s32 = jax.tree.map(lambda x: x.astype(jnp.float32), batch)
+    traj = simulate_batch(scene, s32, jnp.array([0.0, 5.0], jnp.float32), rtol=1e-6, atol=1e-6)
+    assert traj.states.omega.dtype == jnp.float32
+    w_exact = jax.vmap(lambda w: asymmetric_top(5.0, INERTIA, w))(batch.omega)
+    assert float(jnp.max(jnp.abs(traj.states.omega[:, -1].astype(jnp.float64) - w_exact))) < 1e-4
+
+
+def test_simulate_batch_max_steps_flagged(batch):
+    scene = jaxrb.Scene(jaxrb.RigidBody(1.0, INERTIA))
+    ts = jnp.array([0.0, 5.0, 10.0])
+    traj = simulate_batch(scene, batch, ts, max_steps=3, throw=False)
+    assert bool(jnp.all(traj.result == jaxrb.RESULTS.max_steps_reached))
+    with pytest.raises(Exception, match="max"):
+        simulate_batch(scene, batch, ts, max_steps=3, throw=True)
+
+
+def test_simulate_batch_bad_input():
+    scene = jaxrb.Scene(jaxrb.RigidBody(1.0, INERTIA))
+    with pytest.raises(ValueError, match="states0.pos"):
+        simulate_batch(scene, jaxrb.make_state(omega=jnp.ones(3)), jnp.array([0.0, 1.0]))
+    with pytest.raises(ValueError, match="non-decreasing"):
+        simulate_batch(scene, jaxrb.make_state(omega=jnp.ones((2, 3))), jnp.array([1.0, 0.0]))
+    floor_scene = jaxrb.Scene(jaxrb.RigidBody(1.0, INERTIA), floor=jaxrb.Floor(0.5))
+    with pytest.raises(ValueError, match="floor"):
+        simulate_batch(floor_scene, jaxrb.make_state(omega=jnp.ones((2, 3))), jnp.array([0.0, 1.0]))
+
+
+@pytest.mark.parametrize("inertia", [(1.0, 2.0, 3.0), (3.0, 1.0, 2.0), (2.0, 3.0, 1.5)])
+def test_exact_flow_matches_integration(inertia, batch, reference):
+    inertia = jnp.array(inertia)
+    ts = jnp.array([0.0, 2.5, 10.0])
+    scene = jaxrb.Scene(jaxrb.RigidBody(1.0, inertia))
+    if inertia[0] == 1.0:
+        ref = reference[1]
+    else:
+        ref = jax.vmap(
+            lambda s: (
+                jaxrb.simulate(scene, s, ts, solver=dfx.Dopri8(), rtol=1e-13, atol=1e-13).states
+            )
+        )(batch)
+    ex = torque_free_flow(inertia, batch, ts)
+    assert ex.quat.shape == (6, 3, 4)
+    np.testing.assert_allclose(ex.omega, ref.omega, atol=1e-10)
+    assert float(jnp.max(jaxrb.quat_geodesic_angle(ex.quat, ref.quat))) < 1e-9
+    np.testing.assert_allclose(ex.pos, ref.pos, atol=1e-12)
+
+
+def test_exact_flow_long_time_invariants(batch):
+    """At t = 1e4 (thousands of rotations) the world angular momentum and energy are exact."""
+    scene = jaxrb.Scene(jaxrb.RigidBody(1.0, INERTIA))
+    t = jnp.array([0.0, 1e4])
+    ex = torque_free_flow(INERTIA, batch, t)
+    L = jax.vmap(jax.vmap(lambda s: jaxrb.angular_momentum(scene, s)))(ex)
+    E = jax.vmap(jax.vmap(lambda s: jaxrb.energy(scene, s)))(ex)
+    np.testing.assert_allclose(L[:, 1], L[:, 0], rtol=0, atol=1e-10 * float(jnp.max(jnp.abs(L))))
+    np.testing.assert_allclose(E[:, 1], E[:, 0], rtol=1e-12)
+    np.testing.assert_allclose(jnp.linalg.norm(ex.quat, axis=-1), 1.0, atol=1e-14)
+
+
+def test_exact_flow_grad(batch):
+    """Reverse-mode derivative of q(t) in omega0 matches central finite differences."""
+    f = jax.jit(lambda w: torque_free_flow(INERTIA, jaxrb.make_state(omega=w), 3.0).quat)
+    w0 = batch.omega[0]
+    eps = 1e-6
+    fd = jnp.stack([(f(w0 + eps * e) - f(w0 - eps * e)) / (2 * eps) for e in jnp.eye(3)], -1)
+    c = jnp.array([0.3, -0.2, 0.5, 0.1])
+    gr = jax.jit(jax.grad(lambda w: jnp.sum(f(w) * c)))(w0)
+    np.testing.assert_allclose(gr, c @ fd, atol=1e-7)
+
+
+def test_splitting_order_and_conservation():
+    """Lie-group splitting: second order, |q| = 1 and the world angular momentum to round-off."""
+    from jaxrb._splitting import simulate_splitting
+
+    state = jaxrb.make_state(omega=jnp.array([1.0, 0.0, 1.5]), vel=jnp.array([1.0, 0.0, 0.0]))
+    scene = jaxrb.Scene(jaxrb.RigidBody(1.0, INERTIA))
+    ts = jnp.linspace(0.0, 5.0, 3)
+    exact = torque_free_flow(INERTIA, state, ts)
+    errs = []
+    for dt in (0.02, 0.01):
+        traj = simulate_splitting(scene, state, ts, dt=dt)
+        errs.append(float(jnp.max(jaxrb.quat_geodesic_angle(traj.states.quat, exact.quat))))
+        assert float(traj.quat_norm_drift) < 1e-13
+        L = jax.vmap(lambda s: jaxrb.angular_momentum(scene, s))(traj.states)
+        np.testing.assert_allclose(L, jnp.broadcast_to(L[0], L.shape), atol=1e-13)
+        np.testing.assert_allclose(traj.states.pos, exact.pos, atol=1e-12)
+    assert 3.5 < errs[0] / errs[1] < 4.5  # order 2
+    with pytest.raises(ValueError, match="equally spaced"):
+        simulate_splitting(scene, state, jnp.array([0.0, 1.0, 3.0]), dt=0.1)
