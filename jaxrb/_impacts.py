@@ -48,16 +48,21 @@ this removes is added to that impact's `energy_lost`), and the mode becomes SLID
 The tilt gate stands in for the last rock onto the face, which the model would otherwise
 resolve as an endless chatter of corner impacts at a constant tiny speed (a die sliding on a
 corner): the face is laid flat a few milliseconds early, moving the die by at most
-REST_TILT times the face radius (about 1 mm for a 16 mm die). The time at which
+REST_TILT times the face radius (about 1 mm for a 16 mm die). *Chatter* -- an impact whose
+incoming normal speed is below `rest_speed` within 2 rest_speed / g of the previous impact,
+i.e. a point in continuous contact on an edge, a corner or a coin's rim -- is laid on its
+lowest face whatever the tilt: continuous point contact (pivoting on an edge, a coin rolling
+on its rim) is not modelled, and this ends it with the outcome it leads to for a die (the
+face below) at the cost of skipping the final fall; the energy it removes is reported in
+`energy_lost`. The time at which
 the merged series would have ended for a point bouncing on a flat floor, t + 2 u' / (g (1 - e)),
 is recorded as `ImpactRecord.rest_time` (for a dropped ball: t1 (1 + e) / (1 - e) exactly).
 Between that impact and `rest_time` the trajectory's height differs from the exact bounce by
 at most u'^2 / (2 g).
 
-**Not modelled:** rocking or pivoting on an edge or a corner in continuous contact (it is
-resolved as a series of small impacts, which may exhaust `max_impacts` for e near 0), lift-off
-from resting contact, rolling resistance, a coin rolling on its rim, the Painleve paradox (the
-energy guard falls back to a frictionless impulse instead of jamming).
+**Not modelled:** continuous contact on an edge, a corner or a rim (pivoting, a coin rolling
+on its rim: chatter ends it as above), lift-off from resting contact, rolling resistance, the
+Painleve paradox (the energy guard falls back to a frictionless impulse instead of jamming).
 
 **Differentiation.** Segments are restarted from the post-impact state at the located event
 time, so gradients include the shift of the impact time (the saltation correction) through
@@ -315,8 +320,9 @@ def _event_value(t, y, args, scene):
 # ----------------------------------------------------------------------------- maps at events
 
 
-def _resolve_impact(scene, t, state, contact_tol, rest_speed):
-    """Impulses at all touching candidates, then the rest decision.
+def _resolve_impact(scene, t, state, contact_tol, rest_speed, t_last=-jnp.inf):
+    """Impulses at all touching candidates, then the rest decision (`t_last`: the previous
+    impact's time, to tell chatter from a first touch).
 
     Returns (state, mode, point, impulse, normal_speed, energy_lost, rest_time).
     """
@@ -362,7 +368,11 @@ def _resolve_impact(scene, t, state, contact_tol, rest_speed):
         tilt = _safe_norm(n_f[:2])
         w_tip = w - jnp.dot(w, n_f) * n_f  # turning the face over (spin about it is not)
         rock = jnp.abs(state.vel[2]) + _safe_norm(w_tip) * size
-        slow = (rock < rest_speed) & ((tilt * size < rest_height) | (tilt < REST_TILT))
+        # chatter: the contact point is still touching the floor and hits it again within
+        # the flight time of a rest_speed bounce (continuous contact on an edge, a corner or
+        # the rim, resolved as ever smaller impacts): it is laid on its lowest face
+        chatter = (-u_in < rest_speed) & (t - t_last < 2 * rest_speed / g_safe)
+        slow = chatter | (rock < rest_speed) & ((tilt * size < rest_height) | (tilt < REST_TILT))
         target = jnp.array([0.0, 0.0, -1.0], dtype)
         axis = jnp.cross(n_f, target)
         angle = jnp.arctan2(_safe_norm(axis), jnp.dot(n_f, target))
@@ -458,7 +468,8 @@ def simulate_with_impacts(
         )
         if d0 < -contact_tol:
             raise ValueError(
-                f"the body starts below the floor: its lowest point is {-d0:.3g} m under the floor plane"
+                f"the body starts below the floor: its lowest point is {-d0:.3g} m under the "
+                "floor plane"
             )
     if solver is None:
         solver = dfx.Tsit5()
@@ -546,8 +557,11 @@ def _simulate_impacts(
         is_impact = event & (mode == FLIGHT)
         too_many = is_impact & (records.count >= M)
         do = is_impact & ~too_many
+        t_last = jnp.where(
+            records.count > 0, records.time[jnp.maximum(records.count - 1, 0)], -jnp.inf
+        )
         yi, mode_i, point, impulse, un, lost, rest_time = _resolve_impact(
-            scene, t, y, contact_tol, rest_speed
+            scene, t, y, contact_tol, rest_speed, t_last
         )
         records = record(records, do, t, point, impulse, un, lost, rest_time)
         is_stop = event & (mode == SLIDE)
@@ -652,7 +666,7 @@ def _simulate_impacts(
     last = carry["y"]
     filled = carry["filled"]
     raw = jax.tree.map(
-        lambda b, l: jnp.where(filled.reshape((T,) + (1,) * (b.ndim - 1)), b, l[None]),
+        lambda b, end: jnp.where(filled.reshape((T,) + (1,) * (b.ndim - 1)), b, end[None]),
         carry["buffer"],
         last,
     )
