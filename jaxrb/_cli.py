@@ -2,11 +2,15 @@
 
     jaxrb run [SCENE.toml]            simulate, write trajectory (npz, CSV), plots, summary
     jaxrb sweep [SCENE.toml] -p PATH=SPEC ...   a batch over a parameter grid -> results CSV
+    jaxrb fit KIND DATA ...           fit inertia, restitution or drag to measured motion
     jaxrb bench [ARGS...]             the benchmark report (source checkout only)
 
+This file holds `run`, `sweep` and `bench`, the argument parser and `main` (the console script
+entry point). `jaxrb fit` lives in `_cli_fit.py`; the helpers both use in `_cli_common.py`.
 With no scene file the built-in default scene is used (a die thrown with spin onto a table).
 Outputs go to `jaxrb-output/` (change with `-o`); existing files are never overwritten unless
-`--force` is given. The command line computes in float64 (it enables `jax_enable_x64`).
+`--force` is given. User errors exit with status 2, a failed simulation or a fit that does not
+converge with 1. The command line computes in float64 (it enables `jax_enable_x64`).
 """
 
 from __future__ import annotations
@@ -20,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-DEFAULT_OUTPUT = "jaxrb-output"
+from ._cli_common import DEFAULT_OUTPUT, CLIError, _fmt, _outputs_free, _table
+from ._cli_fit import add_fit_parser
 
 _EPILOG_RUN = """\
 outputs (in OUTPUT):
@@ -47,10 +52,6 @@ final position and speed, |omega|, energies, max height, impacts, solver steps.
 """
 
 
-class CLIError(Exception):
-    """A user error on the command line: printed as `jaxrb: error: ...`, exit status 2."""
-
-
 # ---------------------------------------------------------------------------------------------
 # helpers
 
@@ -60,18 +61,6 @@ def _load(scene_arg):
 
     path = default_scene_path() if scene_arg is None else Path(scene_arg)
     return load_scene(path), path
-
-
-def _outputs_free(outdir: Path, names, force: bool):
-    """Raise a CLIError if any output exists and --force was not given."""
-    existing = [outdir / n for n in names if (outdir / n).exists()]
-    if existing and not force:
-        listing = ", ".join(str(p) for p in existing[:4]) + (" ..." if len(existing) > 4 else "")
-        raise CLIError(
-            f"output already exists: {listing}\n"
-            "  use --force to overwrite, or -o/--output to write somewhere else"
-        )
-    outdir.mkdir(parents=True, exist_ok=True)
 
 
 def _simulate(spec, progress=False, throw=True):
@@ -91,30 +80,6 @@ def _simulate(spec, progress=False, throw=True):
     if progress and spec.scene.floor is None:
         kwargs["progress_meter"] = dfx.TqdmProgressMeter()
     return jaxrb.simulate(spec.scene, spec.state0, spec.ts, **kwargs)
-
-
-def _table(rows, header=None, right=True) -> str:
-    """A plain-text table; the first column left-aligned, the others right-aligned if `right`."""
-    rows = [[str(c) for c in r] for r in rows]
-    if header:
-        rows = [list(header)] + rows
-    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
-    lines = []
-    for j, r in enumerate(rows):
-        cells = [r[0].ljust(widths[0])] + [
-            c.rjust(w) if right else c.ljust(w) for c, w in zip(r[1:], widths[1:], strict=True)
-        ]
-        lines.append("  ".join(cells).rstrip())
-        if header and j == 0:
-            lines.append("  ".join("-" * w for w in widths))
-    return "\n".join(lines)
-
-
-def _fmt(x, digits=6):
-    x = np.asarray(x, dtype=float)
-    if x.ndim == 0:
-        return f"{float(x):.{digits}g}"
-    return "(" + ", ".join(f"{v:.{digits}g}" for v in x.reshape(-1)) + ")"
 
 
 def _metrics(traj, scene) -> dict:
@@ -149,15 +114,18 @@ def _metrics(traj, scene) -> dict:
 def _result_name(result) -> str:
     import jaxrb
 
-    code = np.asarray(result._value if hasattr(result, "_value") else result)
-    if code.ndim:
-        code = code.reshape(-1)[0]
-    if int(code) == int(np.asarray(jaxrb.RESULTS.successful._value)):
+    codes = np.asarray(result._value if hasattr(result, "_value") else result).reshape(-1)
+    success = int(np.asarray(jaxrb.RESULTS.successful._value))
+    failed = codes[codes != success]
+    if failed.size == 0:
         return "successful"
-    try:
-        return jaxrb.RESULTS[int(code)].replace("\n", " ")
-    except Exception:  # noqa: BLE001 - a name is only cosmetic
-        return f"failed (code {int(code)})"
+    code = int(failed[0])  # a batch reports its first failure
+    # equinox enumerations are indexed by their items, not by integers; the messages are
+    # stored in a list indexed by the integer code
+    messages = getattr(jaxrb.RESULTS, "_index_to_message", ())
+    if 0 <= code < len(messages) and messages[code]:
+        return " ".join(str(messages[code]).split())
+    return f"failed (code {code})"
 
 
 # ---------------------------------------------------------------------------------------------
@@ -237,7 +205,8 @@ def cmd_run(args) -> int:
     label = "built-in default scene" if args.scene is None else str(path)
     say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     say(
-        f"jaxrb run: {spec.title or label} ({label}); integrating t = {spec.ts[0]:g} .. {spec.ts[-1]:g} s ..."
+        f"jaxrb run: {spec.title or label} ({label}); "
+        f"integrating t = {spec.ts[0]:g} .. {spec.ts[-1]:g} s ..."
     )
     t0 = time.perf_counter()
     traj = _simulate(spec, progress=args.progress, throw=False)
@@ -331,7 +300,8 @@ def _parse_param(text: str):
                 raise ValueError
     except ValueError:
         raise CLIError(
-            f"--param {text!r}: values must be START:STOP:NUM (NUM an integer >= 1) or numbers V1,V2,..."
+            f"--param {text!r}: values must be START:STOP:NUM (NUM an integer >= 1) "
+            "or numbers V1,V2,..."
         ) from None
     return name, [float(v) for v in values]
 
@@ -392,12 +362,8 @@ def cmd_sweep(args) -> int:
         data = copy.deepcopy(base.data)
         for name, value in zip(names, point, strict=True):
             _set_path(data, name, value)
-        specs.append(
-            parse_scene(
-                data,
-                source=f"{path} with {', '.join(f'{n}={v:g}' for n, v in zip(names, point, strict=True))}",
-            )
-        )
+        where = ", ".join(f"{n}={v:g}" for n, v in zip(names, point, strict=True))
+        specs.append(parse_scene(data, source=f"{path} with {where}"))
     rows = []
     t0 = time.perf_counter()
     bar = tqdm(specs, desc="jaxrb sweep", unit="run", disable=not args.progress, file=sys.stderr)
@@ -500,7 +466,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="jaxrb",
         description="jaxrb: JAX-accelerated, differentiable rigid-body dynamics. "
-        "Simulate a scene file, sweep parameters, benchmark.",
+        "Simulate a scene file, sweep parameters, fit parameters to data, benchmark.",
         epilog="run `jaxrb COMMAND --help` for each command's options. "
         "Frames: pos/vel world (z up), omega body, quaternions scalar first body->world.",
     )
@@ -552,6 +518,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sweep.set_defaults(func=cmd_sweep)
 
+    add_fit_parser(sub)
+
     bench = sub.add_parser(
         "bench",
         help="run the benchmark report (from a source checkout)",
@@ -566,7 +534,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    """Entry point of the `jaxrb` console script (and `python -m jaxrb`); returns the exit status."""
+    """Entry point of the `jaxrb` console script (and `python -m jaxrb`); returns the exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:
@@ -582,10 +550,11 @@ def main(argv=None) -> int:
     jax.config.update("jax_enable_x64", True)
     from ._scene_file import SceneFileError
 
+    name = " ".join(filter(None, (args.command, getattr(args, "fit_kind", None))))
     try:
         return args.func(args)
     except (CLIError, SceneFileError) as e:
-        print(f"jaxrb {args.command}: error: {e}", file=sys.stderr)
+        print(f"jaxrb {name}: error: {e}", file=sys.stderr)
         return 2
 
 
