@@ -517,6 +517,242 @@ print(f"jaxrb.simulate: max attitude error {err:.1e} rad; closest approach to th
 assert err < 1e-10""",
     ),
 ]
+NB04 = [
+    (
+        "md",
+        """# 04 — A die and a coin: air resistance, bounces, and the face they settle on
+
+The default scene of `jaxrb run` (`jaxrb/scenes/default.toml`): a 16 mm plastic die thrown with
+spin onto a table. In flight it obeys the Newton–Euler equations with gravity, quadratic air drag
+F = -k |v| v (k = rho C_D A / 2) and an aerodynamic damping moment M = -(c_1 + c_2 |w|) w (body
+frame). At the table (THEORY.md, "Impact with a floor"):
+
+- each impact is located as an event and resolved by Newton's restitution (normal contact
+  velocity u_n' = -e u_n) with Coulomb friction (|j_t| <= mu j_n) at the contact point;
+- corners touching together (a die landing flat) get sequential impulses, each dissipative;
+- once a bounce leaves slower than `rest_speed` (1 cm/s) the remaining bounce series is merged
+  into resting contact: the die lies on a face and slides to a stop under friction.
+
+`traj.impacts` records each impact's `time`, `energy_lost` (J), the impact `count` and the
+`rest_time` at which the body came to rest. We look at height and energy, the energy lost at each
+impact, the face the die settles on, what air drag changes, a tossed coin, and an animation.""",
+    ),
+    (
+        "code",
+        SETUP
+        + """
+import tempfile
+import time
+from pathlib import Path
+
+import equinox as eqx
+from IPython.display import Image, display
+
+import jaxrb.plotting
+from jaxrb._scene_file import default_scene_path, load_scene
+
+spec = load_scene(default_scene_path())
+scene, state0, ts = spec.scene, spec.state0, jnp.asarray(spec.ts)
+OPTS = dict(rtol=spec.options["rtol"], atol=spec.options["atol"], max_steps=spec.options["max_steps"])
+print(f"{spec.title}: {spec.description}")
+print(f"mass {float(scene.body.mass) * 1e3:.1f} g, half edge {float(scene.body.shape.half_extents[0]) * 1e3:.0f} mm; "
+      f"restitution {float(scene.floor.restitution)}, friction {float(scene.floor.friction)}; "
+      f"k = {float(scene.forces[1].coefficient):.3e} kg/m; {ts.size} saves over {float(ts[-1])} s")
+
+t0 = time.perf_counter()
+traj = jaxrb.simulate(scene, state0, ts, **OPTS)  # compiles once for this scene structure
+print(f"simulate (compile + run): {time.perf_counter() - t0:.1f} s")
+assert traj.result == jaxrb.RESULTS.successful
+imp = traj.impacts
+n = int(imp.count)
+t_imp, lost = np.asarray(imp.time[:n]), np.asarray(imp.energy_lost[:n])
+print(f"{n} impacts; at rest on the table from t = {float(imp.rest_time):.4f} s")""",
+    ),
+    (
+        "md",
+        """## 1. Height and energy, impact by impact
+Energy E = m g z + m v^2 / 2 + w . J w / 2 can only fall: air drag and the damping moment take
+power P_air = k |v|^3 + (c_1 + c_2 |w|) |w|^2 in flight, each impact removes `energy_lost`, and
+sliding friction takes the rest once the die lies on the table. Before the first impact only air
+acts, so E(0) - E(t) must equal the integral of P_air (computed here from the saved states).""",
+    ),
+    (
+        "code",
+        """a = jaxrb.plotting.trajectory_arrays(traj, scene)
+t, E = a["t"], a["energy"]
+k = float(scene.forces[1].coefficient)
+c1, c2 = float(scene.forces[2].linear), float(scene.forces[2].quadratic)
+
+
+def air_power(arrays):
+    v, w = np.linalg.norm(arrays["vel"], axis=-1), np.linalg.norm(arrays["omega"], axis=-1)
+    return k * v**3 + (c1 + c2 * w) * w**2
+
+
+P = air_power(a)
+flight = t < t_imp[0]
+air_flight = np.trapezoid(P[flight], t[flight])
+drop_flight = E[0] - E[flight][-1]
+air_total = np.trapezoid(P, t)
+print(f"before the first impact: E(0) - E(t) = {drop_flight:.6e} J, integral of P_air = {air_flight:.6e} J "
+      f"(relative difference {drop_flight / air_flight - 1:.1e})")
+print(f"E(0) = {E[0] * 1e3:.4f} mJ, E(end) = {E[-1] * 1e3:.4f} mJ; lost at the {n} impacts "
+      f"{lost.sum() * 1e3:.4f} mJ, to the air {air_total * 1e3:.4f} mJ, "
+      f"to sliding friction (the rest) {(E[0] - E[-1] - lost.sum() - air_total) * 1e3:.4f} mJ")
+assert np.all(np.diff(E) <= 1e-9 * E[0])  # never gains energy
+assert abs(drop_flight / air_flight - 1) < 1e-3
+assert np.all(lost >= 0) and lost.sum() + air_total < E[0] - E[-1] + 1e-9
+
+fig, (ax1, ax2, ax3) = plt.subplots(3, 1, figsize=(9, 9))
+ax1.plot(t, a["pos"][:, 2] * 1e3, label="mass centre")
+ax1.plot(t, a["lowest_z"] * 1e3, lw=1, label="lowest corner")
+ax2.plot(t, E * 1e3, "k", label="total energy E")
+ax2.plot(t, (E[0] - np.concatenate([[0.0], np.cumsum((P[1:] + P[:-1]) / 2 * np.diff(t))])) * 1e3, "C2--",
+         lw=1, label="E(0) minus air losses only")
+for ax in (ax1, ax2):
+    for i, ti in enumerate(t_imp):
+        ax.axvline(ti, color="C3", lw=0.6, alpha=0.6, label="impact" if i == 0 else None)
+    ax.axvline(float(imp.rest_time), color="k", ls=":", label="at rest")
+    ax.set_xlabel("t (s)")
+    ax.legend(fontsize="small", ncol=2)
+ax1.set_ylabel("height z (mm)")
+ax2.set_ylabel("energy (mJ)")
+ax3.bar(np.arange(1, n + 1), lost * 1e3, color="C3")
+ax3.set_yscale("log")
+ax3.set_xlabel("impact number")
+ax3.set_ylabel("energy lost at the impact (mJ)")
+plt.tight_layout()
+plt.show()""",
+    ),
+    (
+        "md",
+        """The first impact takes most of the energy; the later ones are corner hits and short hops as
+the die rocks onto a face, until the bounce series is merged into resting contact.
+
+## 2. Which face is up?
+Row 3 of R(q) is the world vertical in body coordinates; the body axis closest to it is the one
+pointing up. Faces are numbered so that opposite faces add up to 7: +x 1, +y 2, +z 3, -z 4,
+-y 5, -x 6.""",
+    ),
+    (
+        "code",
+        """FACES = {(0, 1): 1, (1, 1): 2, (2, 1): 3, (2, -1): 4, (1, -1): 5, (0, -1): 6}
+
+
+def face_up(quat):
+    up = np.asarray(jaxrb.quat_to_matrix(quat))[2]  # world +z in body coordinates
+    i = int(np.argmax(np.abs(up)))
+    return FACES[(i, int(np.sign(up[i])))], float(np.degrees(np.arccos(min(1.0, abs(up[i])))))
+
+
+face, tilt = face_up(traj.states.quat[-1])
+half = float(scene.body.shape.half_extents[0])
+z_end, v_end = float(traj.states.pos[-1, 2]), float(jnp.linalg.norm(traj.states.vel[-1]))
+w_end = float(jnp.linalg.norm(traj.states.omega[-1]))
+print(f"the die settles with face {face} up (tilt {tilt:.1e} deg); centre at z = {z_end * 1e3:.4f} mm "
+      f"(half edge {half * 1e3:.1f} mm), |v| = {v_end:.1e} m/s, |w| = {w_end:.1e} rad/s")
+assert tilt < 0.5 and abs(z_end - half) < 1e-5 and v_end < 1e-3 and w_end < 1e-2
+fig = jaxrb.plotting.plot_height_attitude(traj, scene, title="die: height and attitude")
+plt.show()""",
+    ),
+    (
+        "md",
+        """## 3. What air drag changes: the same throw without drag
+Setting the drag coefficient and the damping moment to zero keeps the scene's structure (only
+array values change), so the compiled simulation is reused: no second compilation. We compare
+the flight and the first bounces (t <= 0.3 s, the same number of saves). Without air, energy is
+conserved in flight (to the solver's tolerance); with air it falls by the integral of P_air.""",
+    ),
+    (
+        "code",
+        """air = lambda s: (s.forces[1].coefficient, s.forces[2].linear, s.forces[2].quadratic)  # noqa: E731
+no_air = eqx.tree_at(air, scene, tuple(jnp.zeros_like(x) for x in air(scene)))
+ts_short = jnp.linspace(0.0, 0.3, ts.size)  # same shape: same compiled function
+runs = {}
+for name, sc in (("with air drag", scene), ("without air drag", no_air)):
+    t0 = time.perf_counter()
+    tr = jaxrb.simulate(sc, state0, ts_short, **OPTS)
+    assert tr.result == jaxrb.RESULTS.successful
+    runs[name] = (tr, jaxrb.plotting.trajectory_arrays(tr, sc), time.perf_counter() - t0)
+
+for name, (tr, arr, wall) in runs.items():
+    first = float(tr.impacts.time[0])
+    before = arr["t"] < first
+    p = np.asarray(tr.impacts.point[0]) * 1e3
+    print(f"{name:17}: {wall:.2f} s; first impact at t = {first:.5f} s, at x, y = ({p[0]:.2f}, {p[1]:.2f}) mm, "
+          f"energy lost in flight {(arr['energy'][0] - arr['energy'][before][-1]) * 1e3:.5f} mJ, "
+          f"{int(tr.impacts.count)} impacts by t = 0.3 s")
+tr_0, arr_0, _ = runs["without air drag"]
+before0 = arr_0["t"] < float(tr_0.impacts.time[0])
+assert abs(arr_0["energy"][before0][-1] / arr_0["energy"][0] - 1) < 1e-9  # no air: conserved
+
+fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(13, 4))
+for name, (_, arr, _) in runs.items():
+    ax1.plot(arr["t"], arr["pos"][:, 2] * 1e3, label=name)
+    ax2.plot(arr["t"], arr["energy"] * 1e3, label=name)
+ax1.set_ylabel("mass centre height (mm)")
+ax2.set_ylabel("energy (mJ)")
+for ax in (ax1, ax2):
+    ax.set_xlabel("t (s)")
+    ax.legend()
+plt.show()""",
+    ),
+    (
+        "md",
+        """Air drag on a 4.5 g die in a 0.2 s throw is a small force (k |v|^2 / (m g) is about 1 %):
+it takes under 1 % of the energy before the first impact and moves the landing point by about
+2 mm. After the first impacts the two runs drift apart (different numbers of impacts by
+t = 0.3 s): small differences in the landing attitude change which corner hits next, so the face
+a thrown die ends on is sensitive to everything, air included.
+
+## 4. A coin toss
+A coin is a short cylinder, `jaxrb.Cylinder(radius, half_height)`, its axis along body z (heads
+= +z up). A 5.67 g coin of 24.26 mm diameter and 1.75 mm thickness is tossed from 10 cm with
+1.5 m/s upwards, spinning at 40 rad/s about a diameter (about two and a quarter turns in the
+air), with air drag and a small aerodynamic damping moment, onto a table with restitution 0.3
+and friction 0.3. Rolling on the rim is not modelled (see the module docstring of
+`jaxrb/_impacts.py`): this flip about a diameter lands on a face.""",
+    ),
+    (
+        "code",
+        """RADIUS, HALF, MASS = 0.01213, 0.000875, 0.00567
+coin = jaxrb.RigidBody(MASS, shape=jaxrb.Cylinder(RADIUS, HALF))
+coin_air = jaxrb.QuadraticDrag.from_air(rho=1.225, drag_coefficient=1.1, area=np.pi * RADIUS**2)
+coin_scene = jaxrb.Scene(coin, forces=(jaxrb.Gravity(), coin_air, jaxrb.DampingMoment(quadratic=1e-9)),
+                         floor=jaxrb.Floor(0.3, friction=0.3))
+tilt0 = jaxrb.axis_angle_to_quat(jnp.array([1.0, 0.0, 0.0]), jnp.asarray(0.02))  # nearly flat
+coin0 = jaxrb.make_state(pos=(0.0, 0.0, 0.1), quat=tilt0, vel=(0.0, 0.0, 1.5), omega=(40.0, 0.0, 0.0))
+t0 = time.perf_counter()
+ctraj = jaxrb.simulate(coin_scene, coin0, jnp.linspace(0.0, 0.8, 161), rtol=1e-6, atol=1e-6)
+print(f"simulate (compile + run): {time.perf_counter() - t0:.1f} s")
+assert ctraj.result == jaxrb.RESULTS.successful
+cimp = ctraj.impacts
+up = float(jaxrb.quat_to_matrix(ctraj.states.quat[-1])[2, 2])  # body z . world z
+side = "heads" if up > 0 else "tails"
+print(f"{int(cimp.count)} impacts, first at t = {float(cimp.time[0]):.3f} s; at rest from t = {float(cimp.rest_time):.3f} s; "
+      f"lands {side} up; centre at z = {float(ctraj.states.pos[-1, 2]) * 1e3:.4f} mm")
+print("energy lost per impact (mJ):", np.round(np.asarray(cimp.energy_lost[: int(cimp.count)]) * 1e3, 4))
+assert abs(abs(up) - 1) < 1e-6 and abs(float(ctraj.states.pos[-1, 2]) - HALF) < 1e-6
+fig = jaxrb.plotting.plot_height_attitude(ctraj, coin_scene, title=f"coin toss: lands {side} up")
+plt.show()""",
+    ),
+    (
+        "md",
+        """## 5. The animation
+`jaxrb.plotting.animate` draws the body at R(q) x + pos for each frame (world frame, z up) and
+saves a GIF; here into a temporary directory, shown inline.""",
+    ),
+    (
+        "code",
+        """with tempfile.TemporaryDirectory() as tmp:
+    gif = Path(tmp) / "die.gif"
+    anim = jaxrb.plotting.animate(traj, scene, path=gif, max_frames=30, fps=15, title="die thrown onto a table")
+    plt.close()  # the animation's figure: shown below as the GIF instead
+    data = gif.read_bytes()
+print(f"{len(data) / 1e6:.1f} MB GIF")
+display(Image(data=data, format="gif"))""",
+    ),
+]
 NB05 = [
     (
         "md",
@@ -1017,6 +1253,7 @@ NOTEBOOKS = {
     "01_pendulum_bearing_force": NB01,
     "02_torque_free_precession": NB02,
     "03_orientation": NB03,
+    "04_coin_and_die": NB04,
     "05_inertia_identification": NB05,
     "06_restitution_and_drag_fitting": NB06,
     "07_speed_against_error": NB07,
