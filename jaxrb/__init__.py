@@ -8,33 +8,21 @@ body-embedded (moving) axes, R = R_a(phi1) R_b(phi2) R_c(phi3).
 import importlib.metadata
 
 from . import inertia as inertia
-
-from ._euler import (
-    SEQUENCES as EULER_SEQUENCES,
-    euler_singularity_distance as euler_singularity_distance,
-    euler_to_matrix as euler_to_matrix,
-    euler_to_quat as euler_to_quat,
-    is_euler_singular as is_euler_singular,
-    matrix_to_euler as matrix_to_euler,
-    quat_to_euler as quat_to_euler,
-)
-from ._rates import (
-    angular_acceleration_from_quat as angular_acceleration_from_quat,
-    angular_velocity_matrix as angular_velocity_matrix,
-    omega_body_from_quat_rate as omega_body_from_quat_rate,
-    omega_from_angular_velocity_matrix as omega_from_angular_velocity_matrix,
-    omega_world_from_quat_rate as omega_world_from_quat_rate,
-    quat_E as quat_E,
-    quat_G as quat_G,
-    quat_rate as quat_rate,
-    quat_rate_world as quat_rate_world,
-)
 from ._body import RigidBody as RigidBody
 from ._dynamics import (
     accelerations as accelerations,
     joint_reaction as joint_reaction,
     total_wrench as total_wrench,
     vector_field as vector_field,
+)
+from ._euler import (
+    SEQUENCES as EULER_SEQUENCES,  # noqa: F401 (public name, the 12 sequence strings)
+    euler_singularity_distance as euler_singularity_distance,
+    euler_to_matrix as euler_to_matrix,
+    euler_to_quat as euler_to_quat,
+    is_euler_singular as is_euler_singular,
+    matrix_to_euler as matrix_to_euler,
+    quat_to_euler as quat_to_euler,
 )
 from ._floor import Floor as Floor
 from ._forces import (
@@ -61,6 +49,17 @@ from ._quaternion import (
     quat_to_rotvec as quat_to_rotvec,
     skew as skew,
 )
+from ._rates import (
+    angular_acceleration_from_quat as angular_acceleration_from_quat,
+    angular_velocity_matrix as angular_velocity_matrix,
+    omega_body_from_quat_rate as omega_body_from_quat_rate,
+    omega_from_angular_velocity_matrix as omega_from_angular_velocity_matrix,
+    omega_world_from_quat_rate as omega_world_from_quat_rate,
+    quat_E as quat_E,
+    quat_G as quat_G,
+    quat_rate as quat_rate,
+    quat_rate_world as quat_rate_world,
+)
 from ._results import RESULTS as RESULTS
 from ._scene import Scene as Scene
 from ._shapes import (
@@ -70,8 +69,8 @@ from ._shapes import (
     Sphere as Sphere,
 )
 from ._simulate import Trajectory as Trajectory, simulate as simulate
-from ._sweep import grid as grid, random_draws as random_draws, sweep as sweep
 from ._state import State as State, make_state as make_state
+from ._sweep import grid as grid, random_draws as random_draws, sweep as sweep
 
 # [contact]
 

@@ -362,7 +362,8 @@ def _force(raw, where, source):
         close = difflib.get_close_matches(str(kind), _FORCES, n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else ""
         raise SceneFileError(
-            f"{source}: {where}.type: unknown force {kind!r}{hint}; choose one of: {', '.join(_FORCES)}"
+            f"{source}: {where}.type: unknown force {kind!r}{hint}; "
+            f"choose one of: {', '.join(_FORCES)}"
         )
     f = _Table(raw, where, source, _FORCES[kind])
     if kind == "gravity":
@@ -375,7 +376,8 @@ def _force(raw, where, source):
                 if f.has(k):
                     f.fail(
                         k,
-                        "give either `coefficient` or (`rho`, `drag_coefficient`, `area`), not both",
+                        "give either `coefficient` or (`rho`, `drag_coefficient`, `area`), "
+                        "not both",
                     )
             return jaxrb.QuadraticDrag(f.number("coefficient", nonnegative=True))
         if not f.has("area"):

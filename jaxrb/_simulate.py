@@ -175,7 +175,9 @@ def simulate(
             max_steps=max_steps,
             stepsize_controller=stepsize_controller,
             adjoint=adjoint,
-            throw=throw, max_impacts=max_impacts, rest_speed=rest_speed,
+            throw=throw,
+            max_impacts=max_impacts,
+            rest_speed=rest_speed,
         )
     if solver is None:
         solver = dfx.Tsit5()

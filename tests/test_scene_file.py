@@ -116,7 +116,8 @@ num_saves = 11
         ),
         # unknown force
         (
-            '[body]\nmass = 1.0\ninertia = [1, 2, 3]\n[[forces]]\ntype = "gravty"\n[simulation]\nt_end = 1.0\n',
+            '[body]\nmass = 1.0\ninertia = [1, 2, 3]\n[[forces]]\ntype = "gravty"\n'
+            "[simulation]\nt_end = 1.0\n",
             "[[forces]][0].type",
             "unknown force 'gravty' (did you mean 'gravity'?)",
         ),
