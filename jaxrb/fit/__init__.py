@@ -4,9 +4,11 @@ differentiable simulation, with Gauss–Newton uncertainties and identifiability
 - `fit_inertia`: full inertia tensor (products included) from attitude / angular velocity.
 - `fit_drag`: drag coefficient from a tracked flight.
 - `fit_restitution`: restitution from bounce times and/or apex heights.
+- `fit_contact`: restitution and friction from a tracked trajectory with bounces.
 - `least_squares_fit`: the shared driver, for your own residual functions.
 """
 
+from ._contact import fit_contact as fit_contact
 from ._drag import fit_drag as fit_drag
 from ._inertia_id import fit_inertia as fit_inertia
 from ._least_squares import (
