@@ -428,8 +428,8 @@ def simulate_with_impacts(
     max_impacts: int = DEFAULT_MAX_IMPACTS,
     rest_speed: float = DEFAULT_REST_SPEED,
     contact_tol: float | None = None,
-    event_rtol: float = 1e-12,
-    event_atol: float = 1e-12,
+    event_rtol: float | None = None,
+    event_atol: float | None = None,
 ):
     """`simulate` for a scene with a floor (called by `jaxrb.simulate`); see the module docstring.
 
@@ -441,7 +441,8 @@ def simulate_with_impacts(
       resting contact (default 1e-2).
     - `contact_tol`: distance (m) under which a contact candidate counts as touching at an
       impact (simultaneous contacts); default 100 * atol.
-    - `event_rtol`, `event_atol`: tolerances (s) of the Newton root finder on the event time.
+    - `event_rtol`, `event_atol`: tolerances (s) of the bisection on the event time; default
+      1e-12 in float64, 64 machine epsilons (about 8e-6) in float32.
 
     **Returns:** a `Trajectory` whose `impacts` is an `ImpactRecord`.
     """
@@ -462,6 +463,9 @@ def simulate_with_impacts(
         raise ValueError(f"floor friction must be >= 0, got {floor.friction}")
     ts = jnp.asarray(ts)
     state0 = jax.tree.map(lambda x: jnp.asarray(x, ts.dtype), state0)
+    floor_tol = max(1e-12, 64 * float(jnp.finfo(ts.dtype).eps))
+    event_rtol = floor_tol if event_rtol is None else event_rtol
+    event_atol = floor_tol if event_atol is None else event_atol
     if all(is_concrete(x) for x in (*jax.tree.leaves(state0), *jax.tree.leaves(scene))):
         d0 = float(
             scene.body.shape.floor_distance(state0.pos, quat_normalize(state0.quat), floor.height)
@@ -584,7 +588,9 @@ def _simulate_impacts(
 
     term = dfx.ODETerm(lambda t, y, args: _rates(t, y, args, scene))
     event = dfx.Event(
-        lambda t, y, args, **kw: _event_value(t, y, args, scene),
+        # in JAX's default float dtype: diffrax compares it with a Python float internally,
+        # which fails for a float32 scene when float64 is enabled
+        lambda t, y, args, **kw: _event_value(t, y, args, scene).astype(jnp.result_type(float)),
         root_finder=optx.Bisection(
             rtol=event_rtol, atol=event_atol, flip="detect", expand_if_necessary=True
         ),

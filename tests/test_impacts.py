@@ -366,3 +366,18 @@ def test_bad_input_flagged_under_vmap():
     expected = [R.successful, R.invalid_restitution, R.invalid_friction, R.starts_below_floor]
     for got, want in zip(res._value, expected, strict=True):
         assert got == want._value
+
+
+def test_float32_die_settles():
+    """A float32 scene (with float64 enabled elsewhere) bounces and comes to rest on a face."""
+    f32 = lambda x: jnp.asarray(x, jnp.float32)  # noqa: E731
+    body = jaxrb.RigidBody(f32(0.004), shape=jaxrb.Box(f32([A_DIE, A_DIE, A_DIE])))
+    scene = jax.tree.map(f32, _tumbler(body.shape, 0.5, 0.3))
+    state0 = jax.tree.map(f32, _throw())
+    traj = jaxrb.simulate(
+        scene, state0, jnp.linspace(0.0, 1.0, 5, dtype=jnp.float32), rtol=1e-5, atol=1e-5
+    )
+    assert traj.states.pos.dtype == jnp.float32
+    assert int(traj.impacts.count) > 3 and np.isfinite(float(traj.impacts.rest_time))
+    np.testing.assert_array_equal(np.asarray(traj.states.vel[-1]), 0.0)
+    assert float(traj.states.pos[-1, 2]) == pytest.approx(A_DIE, abs=1e-6)
