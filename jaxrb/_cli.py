@@ -24,7 +24,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ._cli_common import DEFAULT_OUTPUT, CLIError, _fmt, _outputs_free, _table
+from ._cli_common import (
+    CLIError,
+    _fmt,
+    _outputs_free,
+    _table,
+    add_output_options,
+)
 from ._cli_fit import add_fit_parser
 
 _EPILOG_RUN = """\
@@ -444,14 +450,7 @@ def _add_common(p, output=True):
         help="scene file (TOML); default: the built-in die-on-a-table scene",
     )
     if output:
-        p.add_argument(
-            "-o",
-            "--output",
-            default=DEFAULT_OUTPUT,
-            metavar="DIR",
-            help=f"output directory (default: {DEFAULT_OUTPUT}/)",
-        )
-        p.add_argument("-f", "--force", action="store_true", help="overwrite existing output files")
+        add_output_options(p)
     p.add_argument(
         "--progress",
         action=argparse.BooleanOptionalAction,

@@ -18,6 +18,20 @@ class CLIError(Exception):
     """A user error on the command line: printed as `jaxrb: error: ...`, exit status 2."""
 
 
+def add_output_options(parser) -> None:
+    """`-o/--output DIR` and `-f/--force`, the same for every command that writes files."""
+    parser.add_argument(
+        "-o",
+        "--output",
+        default=DEFAULT_OUTPUT,
+        metavar="DIR",
+        help=f"output directory (default: {DEFAULT_OUTPUT}/)",
+    )
+    parser.add_argument(
+        "-f", "--force", action="store_true", help="overwrite existing output files"
+    )
+
+
 def _outputs_free(outdir: Path, names, force: bool):
     """Raise a CLIError if any output exists and --force was not given."""
     existing = [outdir / n for n in names if (outdir / n).exists()]

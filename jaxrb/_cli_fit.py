@@ -22,7 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ._cli_common import DEFAULT_OUTPUT, CLIError, _fmt, _outputs_free, _table
+from ._cli_common import (
+    CLIError,
+    _fmt,
+    _outputs_free,
+    _table,
+    add_output_options,
+)
 
 _EPILOG_FIT = """\
 kinds:
@@ -861,14 +867,7 @@ def add_fit_parser(sub):
         p.add_argument(
             "data", nargs="?", default=None, metavar="DATA", help="data file: .csv or .npz"
         )
-        p.add_argument(
-            "-o",
-            "--output",
-            default=DEFAULT_OUTPUT,
-            metavar="DIR",
-            help=f"output directory (default: {DEFAULT_OUTPUT}/)",
-        )
-        p.add_argument("-f", "--force", action="store_true", help="overwrite existing output files")
+        add_output_options(p)
         p.add_argument(
             "--write-example",
             metavar="FILE",
