@@ -84,7 +84,9 @@ def markdown_table(rows: list[Row], device: str) -> str:
     return head + "\n".join(lines) + "\n"
 
 
-def plot_work_precision(rows: list[Row], title: str, path: str) -> None:
+def plot_work_precision(
+    rows: list[Row], title: str, path: str, ylabel: str = "worst body's error"
+) -> None:
     """Error vs wall time per body, one line per (method, dtype); saved as PNG."""
     import matplotlib
 
@@ -107,7 +109,7 @@ def plot_work_precision(rows: list[Row], title: str, path: str) -> None:
             label=f"{method} ({dtype})",
         )
     ax.set_xlabel("wall time per body (us)")
-    ax.set_ylabel("worst body's error")
+    ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)

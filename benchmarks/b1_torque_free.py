@@ -129,33 +129,34 @@ def run(n=1000, dtypes=("float64", "float32"), n_python=10, quick=False, scaling
                     float(tr.num_steps[0]),
                 )
             )
-        # plain vmap of diffrax Dopri8 through jaxrb.simulate
-        tols = [1e-7, 1e-8, 1e-9, 1e-10] if dname == "float64" else [1e-5, 1e-6]
-        if quick:
-            tols = tols[1::2]
-        fn = jax.jit(
-            jax.vmap(
-                lambda s, tol: jaxrb.simulate(
-                    scene, s, ts, solver=dfx.Dopri8(), rtol=tol, atol=tol, throw=False
-                ),
-                in_axes=(0, None),
-            )
-        )
-        for tol in tols:
-            first, best, tr = C.time_jax(fn, states0, jnp.asarray(tol, dt))
-            rows.append(
-                C.Row(
-                    "B1",
-                    "diffrax Dopri8, vmap(jaxrb.simulate)",
-                    dname,
-                    f"tol {tol:.0e}",
-                    n,
-                    error(tr.states.omega[:, -1], tr.states.quat[:, -1]),
-                    best / n * 1e6,
-                    first - best,
-                    float(jnp.mean(tr.num_steps)),
+        # plain vmap of diffrax Dopri8 / Tsit5 through jaxrb.simulate
+        for solver_name, solver in (("Dopri8", dfx.Dopri8()), ("Tsit5", dfx.Tsit5())):
+            tols = [1e-7, 1e-8, 1e-9, 1e-10] if dname == "float64" else [1e-5, 1e-6]
+            if quick:
+                tols = tols[1::2]
+            fn = jax.jit(
+                jax.vmap(
+                    lambda s, tol, solver=solver: jaxrb.simulate(
+                        scene, s, ts, solver=solver, rtol=tol, atol=tol, throw=False
+                    ),
+                    in_axes=(0, None),
                 )
             )
+            for tol in tols:
+                first, best, tr = C.time_jax(fn, states0, jnp.asarray(tol, dt))
+                rows.append(
+                    C.Row(
+                        "B1",
+                        f"diffrax {solver_name}, vmap(jaxrb.simulate)",
+                        dname,
+                        f"tol {tol:.0e}",
+                        n,
+                        error(tr.states.omega[:, -1], tr.states.quat[:, -1]),
+                        best / n * 1e6,
+                        first - best,
+                        float(jnp.mean(tr.num_steps)),
+                    )
+                )
         # fixed-step jnp RK4
         for n_steps in [250, 500, 1000, 2000] if not quick else [500, 2000]:
             fn = rk4_fixed(scene, n_steps)
