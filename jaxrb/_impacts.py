@@ -372,7 +372,7 @@ def _resolve_impact(scene, t, state, contact_tol, rest_speed, t_last=-jnp.inf):
         # the flight time of a rest_speed bounce (continuous contact on an edge, a corner or
         # the rim, resolved as ever smaller impacts): it is laid on its lowest face
         chatter = (-u_in < rest_speed) & (t - t_last < 2 * rest_speed / g_safe)
-        slow = chatter | (rock < rest_speed) & ((tilt * size < rest_height) | (tilt < REST_TILT))
+        slow = chatter | ((rock < rest_speed) & ((tilt * size < rest_height) | (tilt < REST_TILT)))
         target = jnp.array([0.0, 0.0, -1.0], dtype)
         axis = jnp.cross(n_f, target)
         angle = jnp.arctan2(_safe_norm(axis), jnp.dot(n_f, target))
@@ -463,9 +463,9 @@ def simulate_with_impacts(
         raise ValueError(f"floor friction must be >= 0, got {floor.friction}")
     ts = jnp.asarray(ts)
     state0 = jax.tree.map(lambda x: jnp.asarray(x, ts.dtype), state0)
-    floor_tol = max(1e-12, 64 * float(jnp.finfo(ts.dtype).eps))
-    event_rtol = floor_tol if event_rtol is None else event_rtol
-    event_atol = floor_tol if event_atol is None else event_atol
+    event_tol = max(1e-12, 64 * float(jnp.finfo(ts.dtype).eps))
+    event_rtol = event_tol if event_rtol is None else event_rtol
+    event_atol = event_tol if event_atol is None else event_atol
     if all(is_concrete(x) for x in (*jax.tree.leaves(state0), *jax.tree.leaves(scene))):
         d0 = float(
             scene.body.shape.floor_distance(state0.pos, quat_normalize(state0.quat), floor.height)
