@@ -417,21 +417,21 @@ def simulate_with_impacts(
     state0: State,
     ts,
     *,
-    solver=None,
-    rtol=1e-8,
-    atol=1e-8,
-    dt0=None,
-    max_steps=100_000,
-    stepsize_controller=None,
-    adjoint=None,
-    throw=True,
+    solver,
+    stepsize_controller,
+    adjoint,
+    atol,
+    dt0,
+    max_steps,
+    throw,
     max_impacts: int = DEFAULT_MAX_IMPACTS,
     rest_speed: float = DEFAULT_REST_SPEED,
     contact_tol: float | None = None,
     event_rtol: float | None = None,
     event_atol: float | None = None,
 ):
-    """`simulate` for a scene with a floor (called by `jaxrb.simulate`); see the module docstring.
+    """`simulate` for a scene with a floor (called by `jaxrb.simulate`, which resolves the
+    solver, step-size controller and adjoint defaults); see the module docstring.
 
     Extra keyword arguments (beyond `simulate`'s):
 
@@ -475,12 +475,6 @@ def simulate_with_impacts(
                 f"the body starts below the floor: its lowest point is {-d0:.3g} m under the "
                 "floor plane"
             )
-    if solver is None:
-        solver = dfx.Tsit5()
-    if stepsize_controller is None:
-        stepsize_controller = dfx.PIDController(rtol=rtol, atol=atol)
-    if adjoint is None:
-        adjoint = dfx.RecursiveCheckpointAdjoint()
     return _simulate_impacts(
         scene,
         state0,

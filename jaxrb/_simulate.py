@@ -161,24 +161,6 @@ def simulate(
     for name, n in (("pos", 3), ("quat", 4), ("vel", 3), ("omega", 3)):
         as_float_array(getattr(state0, name), f"state0.{name}", (n,))
     _check_concrete_inputs(state0, ts)
-    if scene.floor is not None:
-        from ._impacts import simulate_with_impacts
-
-        return simulate_with_impacts(
-            scene,
-            state0,
-            ts,
-            solver=solver,
-            rtol=rtol,
-            atol=atol,
-            dt0=dt0,
-            max_steps=max_steps,
-            stepsize_controller=stepsize_controller,
-            adjoint=adjoint,
-            throw=throw,
-            max_impacts=max_impacts,
-            rest_speed=rest_speed,
-        )
     if solver is None:
         solver = dfx.Tsit5()
     if stepsize_controller is None:
@@ -188,6 +170,23 @@ def simulate(
         dt0 = jnp.asarray(dt0, ts.dtype)
     if adjoint is None:
         adjoint = dfx.RecursiveCheckpointAdjoint()
+    if scene.floor is not None:
+        from ._impacts import simulate_with_impacts
+
+        return simulate_with_impacts(
+            scene,
+            state0,
+            ts,
+            solver=solver,
+            stepsize_controller=stepsize_controller,
+            adjoint=adjoint,
+            atol=atol,
+            dt0=dt0,
+            max_steps=max_steps,
+            throw=throw,
+            max_impacts=max_impacts,
+            rest_speed=rest_speed,
+        )
     if progress_meter is None:
         progress_meter = dfx.NoProgressMeter()
     state0 = jax.tree.map(lambda x: jnp.asarray(x, ts.dtype), state0)
