@@ -17,7 +17,13 @@ the solver's dense interpolant, i.e. to solver precision rather than to a step:
   A box or cylinder lying on a face slides on it with the face's friction approximated by an
   ellipsoidal limit surface of radius rho = sqrt(I_zz / m) (radius of gyration about the
   vertical): the generalised slip s = (v_x, v_y, rho w_z) decays along a fixed direction, so
-  translation and spin stop together. Event: the slip reaches zero (s . s_0 = 0).
+  translation and spin stop together. Event: the slip falls to `SLIP_STOP_FRACTION` (1e-3)
+  times `rest_speed` or reverses along its initial direction (s . s_0 = 0), whichever comes
+  first; the slip left is then removed by the tangential friction impulse at the contact
+  (for a face: the body stops). Ending a few microseconds early keeps the solver off the
+  discontinuity of Coulomb friction at zero slip (where adaptive steps creep towards zero
+  slip without crossing it); it moves the body by about s_stop^2 / (2 mu g), 2e-11 m for the
+  default rest_speed and mu = 0.3.
 - `STICK`: a sphere rolls without slipping (the contact force solves the rolling constraint,
   so drag or a wrench act through it); a box or cylinder is at rest on its face.
   Static friction is assumed to hold and lift-off is not detected in contact modes.
@@ -105,7 +111,7 @@ _SWEEPS = 2
 REST_TILT = 0.1  # rad: a box or cylinder this close to flat, chattering, is laid on its face
 DEFAULT_MAX_IMPACTS = 64
 DEFAULT_REST_SPEED = 1e-2
-_SLIP_TOL = 1e-9
+SLIP_STOP_FRACTION = 1e-3  # SLIDE ends when |slip| < SLIP_STOP_FRACTION * rest_speed
 
 
 class ImpactRecord(eqx.Module):
@@ -300,6 +306,26 @@ def _contact_slip(scene, state):
     return _face_slip(scene.body, state)
 
 
+def _zero_slip(scene, state):
+    """Remove the contact's slip: a box or cylinder on a face stops; a sphere gets the
+    tangential impulse at its contact point that brings the slip to zero (what Coulomb
+    friction would deliver over the last instant of sliding)."""
+    body = scene.body
+    if body.shape.rest_faces() is not None:
+        z = jnp.zeros_like(state.vel)
+        return State(state.pos, state.quat, z, z)
+    r = _contact_offsets(body.shape, state)[0]
+    R = quat_to_matrix(state.quat)
+    inv_iw = _inverse_world_inertia(body, R)
+    K = _effective_inverse_mass(body.mass, inv_iw, r)
+    s = _contact_slip(scene, state)
+    j_t = jnp.linalg.solve(K[:2, :2], -s[:2])
+    j = jnp.concatenate([j_t, jnp.zeros_like(j_t[:1])])
+    vel = state.vel + j / body.mass
+    omega = R.T @ (R @ state.omega + inv_iw @ jnp.cross(r, j))
+    return State(state.pos, state.quat, vel, omega)
+
+
 def _rates(t, y, args, scene):
     mode = args[0]
     state = _unit(y)
@@ -309,11 +335,12 @@ def _rates(t, y, args, scene):
 
 
 def _event_value(t, y, args, scene):
-    mode, slip0, dist_shift = args
+    mode, slip0_dir, dist_shift, slip_stop = args
     state = _unit(y)
     floor = scene.floor
     dist = scene.body.shape.floor_distance(state.pos, state.quat, floor.height) - dist_shift
-    slip = jnp.dot(_contact_slip(scene, state), slip0)
+    s = _contact_slip(scene, state)
+    slip = jnp.minimum(jnp.dot(s, slip0_dir), _safe_norm(s) - slip_stop)
     return jnp.where(mode == FLIGHT, dist, jnp.where(mode == SLIDE, slip, jnp.ones_like(dist)))
 
 
@@ -382,10 +409,8 @@ def _resolve_impact(scene, t, state, contact_tol, rest_speed, t_last=-jnp.inf):
         settled = State(pos, quat, state.vel.at[2].set(0.0), quat_to_matrix(quat).T @ w_flat)
     settle = slow & has_gravity & (e < 1)
     slip = _contact_slip(scene, settled)
-    sliding = _safe_norm(slip) > _SLIP_TOL
-    if faces is not None:  # at rest on a face: exactly zero velocities
-        rest = State(settled.pos, settled.quat, jnp.zeros(3, dtype), jnp.zeros(3, dtype))
-        settled = _where(sliding, settled, rest)
+    sliding = _safe_norm(slip) > SLIP_STOP_FRACTION * rest_speed
+    settled = _where(sliding, settled, _zero_slip(scene, settled))
     state = _where(settle, settled, state)
     mode = jnp.where(settle, jnp.where(sliding, SLIDE, STICK), FLIGHT)
     zeno = 2 * jnp.maximum(u_out, 0.0) / (g_safe * jnp.where(e < 1, 1 - e, 1.0))
@@ -393,13 +418,6 @@ def _resolve_impact(scene, t, state, contact_tol, rest_speed, t_last=-jnp.inf):
     lost = e_before - energy(scene, state)
     point = pos_before + r0  # world contact point
     return state, mode, point, total, -u_in, lost, rest_time
-
-
-def _stop_sliding(scene, state):
-    if scene.body.shape.rest_faces() is None:
-        return state
-    z = jnp.zeros_like(state.vel)
-    return State(state.pos, state.quat, z, z)
 
 
 # ----------------------------------------------------------------------------- the driver
@@ -438,7 +456,8 @@ def simulate_with_impacts(
     - `max_impacts`: static size of the impact record and bound on the number of impacts;
       reaching it before `ts[-1]` gives `RESULTS.max_impacts_reached`.
     - `rest_speed`: outgoing normal speed (m/s) below which the bounce series is merged into
-      resting contact (default 1e-2).
+      resting contact (default 1e-2); 1e-3 of it is the slip (m/s) at which sliding
+      contact ends.
     - `contact_tol`: distance (m) under which a contact candidate counts as touching at an
       impact (simultaneous contacts); default 100 * atol.
     - `event_rtol`, `event_atol`: tolerances (s) of the bisection on the event time; default
@@ -563,16 +582,17 @@ def _simulate_impacts(
         )
         records = record(records, do, t, point, impulse, un, lost, rest_time)
         is_stop = event & (mode == SLIDE)
-        y = _where(do, yi, _where(is_stop, _stop_sliding(scene, y), y))
+        y = _where(do, yi, _where(is_stop, _zero_slip(scene, y), y))
         mode = jnp.where(do, mode_i, jnp.where(is_stop, STICK, mode))
         return y, mode, records, too_many
 
     def slip0_and_shift(y, mode):
         y = _unit(y)
         slip0 = _contact_slip(scene, y)
+        slip0_dir = slip0 / jnp.maximum(_safe_norm(slip0), jnp.finfo(dtype).tiny)
         d = shape.floor_distance(y.pos, y.quat, floor.height)
         shift = jnp.where(d > 0, 0.0, d - 1e-12)
-        return slip0, shift
+        return slip0_dir, shift
 
     # a body starting in contact (on the floor, approaching or at rest) is resolved at ts[0]
     start_touch = (d0 <= contact_tol) & (result == RESULTS.successful)
@@ -606,7 +626,7 @@ def _simulate_impacts(
     def segment(carry, _):
         done, mode, y = carry["done"], carry["mode"], carry["y"]
         t0 = jnp.where(done, t_end, carry["t"])
-        slip0, shift = slip0_and_shift(y, mode)
+        slip0_dir, shift = slip0_and_shift(y, mode)
         sol = dfx.diffeqsolve(
             term,
             solver,
@@ -614,7 +634,7 @@ def _simulate_impacts(
             t1=t_end,
             dt0=dt0,
             y0=y,
-            args=(mode, slip0, shift),
+            args=(mode, slip0_dir, shift, jnp.asarray(SLIP_STOP_FRACTION * rest_speed, dtype)),
             saveat=dfx.SaveAt(
                 subs=[dfx.SubSaveAt(ts=jnp.clip(ts, t0, t_end)), dfx.SubSaveAt(t1=True)]
             ),

@@ -321,6 +321,91 @@ def test_die_batch_vmap_equals_per_member(getkey):
         )
 
 
+# ------------------------------------------------------------------ sliding contact
+
+
+@jax.jit
+def _slide_run(scene, state0, ts):
+    return jaxrb.simulate(scene, state0, ts, throw=False, rtol=1e-12, atol=1e-12)
+
+
+def test_sphere_slides_then_rolls():
+    """A uniform ball set down sliding (v0, no spin): friction mu m g decelerates it and spins
+    it up until rolling at t* = 2 v0 / (7 mu g), then it rolls at 5/7 v0 for ever."""
+    v0, mu = 1.2, 0.2
+    t_star = 2 * v0 / (7 * mu * G)
+    x_star = v0 * t_star - 0.5 * mu * G * t_star**2
+    ts = jnp.asarray([0.0, 0.3 * t_star, 0.9 * t_star, 1.1 * t_star, 2.0, 5.0])
+    state0 = jaxrb.make_state(pos=(0.0, 0.0, R_BALL), vel=(v0, 0.0, 0.0))
+    traj = _slide_run(_ball_scene(0.5, mu), state0, ts)
+    assert traj.result == jaxrb.RESULTS.successful
+    t = np.asarray(ts)
+    x = np.where(t < t_star, v0 * t - 0.5 * mu * G * t**2, x_star + 5 / 7 * v0 * (t - t_star))
+    vx = np.where(t < t_star, v0 - mu * G * t, 5 / 7 * v0)
+    wy = np.where(t < t_star, 2.5 * mu * G * t / R_BALL, 5 / 7 * v0 / R_BALL)
+    np.testing.assert_allclose(np.asarray(traj.states.pos[:, 0]), x, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(traj.states.vel[:, 0]), vx, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(traj.states.omega[:, 1]), wy, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(np.asarray(traj.states.pos[:, 2]), R_BALL, rtol=0, atol=1e-12)
+
+
+def _sliding_die(mu, drag, damping):
+    """A die on the floor with drag (zero coefficients: the same compiled run, no drag)."""
+    body = jaxrb.RigidBody(0.004, shape=jaxrb.Box((A_DIE, A_DIE, A_DIE)))
+    forces = (jaxrb.Gravity(), jaxrb.LinearDrag(drag), jaxrb.DampingMoment(damping))
+    return jaxrb.Scene(body, forces=forces, floor=jaxrb.Floor(0.5, mu))
+
+
+def test_die_slides_to_rest_on_its_face():
+    """A die lying on a face, sliding and spinning: the slip s = (v_x, v_y, rho w_z) (rho the
+    radius of gyration about the vertical) shrinks at the rate mu g along a fixed direction,
+    so it stops at T = |s0| / (mu g), having moved v0 T / 2 and turned w_z0 T / 2."""
+    mu, vx, vy, wz = 0.3, 0.4, -0.25, 30.0
+    scene = _sliding_die(mu, drag=0.0, damping=0.0)
+    rho = A_DIE * np.sqrt(2 / 3)  # cube: I_zz = (2/3) m a^2 about the vertical
+    T = np.linalg.norm([vx, vy, rho * wz]) / (mu * G)
+    ts = jnp.asarray([0.0, 0.5 * T, T + 0.01, 1.0])
+    state0 = jaxrb.make_state(pos=(0.0, 0.0, A_DIE), vel=(vx, vy, 0.0), omega=(0.0, 0.0, wz))
+    traj = _slide_run(scene, state0, ts)
+    assert traj.result == jaxrb.RESULTS.successful
+    frac = 1 - (1 - 0.5) ** 2  # distance fraction covered by t = T/2 at constant deceleration
+    np.testing.assert_allclose(
+        np.asarray(traj.states.pos[1, :2]), frac * np.array([vx, vy]) * T / 2, atol=1e-10
+    )
+    for k in (2, 3):  # at rest, exactly
+        np.testing.assert_allclose(
+            np.asarray(traj.states.pos[k]), [vx * T / 2, vy * T / 2, A_DIE], rtol=0, atol=1e-10
+        )
+        np.testing.assert_array_equal(np.asarray(traj.states.vel[k]), 0.0)
+        np.testing.assert_array_equal(np.asarray(traj.states.omega[k]), 0.0)
+        yaw = 2 * np.arctan2(float(traj.states.quat[k, 3]), float(traj.states.quat[k, 0]))
+        np.testing.assert_allclose(yaw, wz * T / 2, rtol=0, atol=1e-8)
+
+
+def test_sliding_dice_with_drag_batch_equals_per_member(getkey):
+    """Drag turns the slip direction while a die slides on its face; sliding must still end
+    cleanly (no creeping onto the Coulomb discontinuity) for every member under vmap."""
+    scene = _sliding_die(0.3, drag=0.012, damping=1e-7)
+    ts = jnp.linspace(0.0, 1.0, 5)
+
+    def run(v, wz):
+        state0 = jaxrb.make_state(
+            pos=(0.0, 0.0, A_DIE), vel=jnp.stack([v[0], v[1], 0.0]), omega=jnp.stack([0, 0, wz])
+        )
+        return _slide_run(scene, state0, ts)
+
+    vs = jax.random.normal(getkey(), (6, 2)) * 0.5
+    wzs = jax.random.normal(getkey(), (6,)) * 40.0
+    batch = jax.vmap(run)(vs, wzs)
+    assert np.all(np.asarray(batch.result._value) == jaxrb.RESULTS.successful._value)
+    np.testing.assert_array_equal(np.asarray(batch.states.vel[:, -1]), 0.0)
+    for i in range(2):
+        one = run(vs[i], wzs[i])
+        np.testing.assert_allclose(
+            np.asarray(one.states.pos), np.asarray(batch.states.pos[i]), rtol=0, atol=1e-12
+        )
+
+
 # ------------------------------------------------------------------ bad input
 
 
