@@ -36,7 +36,20 @@ class Row:
 
 def device_name() -> str:
     d = jax.devices()[0]
-    return f"{d.platform}:{getattr(d, 'device_kind', '?')}"
+    k = len(jax.devices())
+    more = f" ({k} devices; rows not marked otherwise use the first)" if k > 1 else ""
+    return f"{d.platform}:{getattr(d, 'device_kind', '?')}{more}"
+
+
+def lean_variants():
+    """(label, devices) for `simulate_batch`: all devices, and one device when there are more."""
+    devs = jax.devices()
+    if len(devs) == 1:
+        return [("jaxrb lean DOP853 (simulate_batch)", devs)]
+    return [
+        (f"jaxrb lean DOP853 (simulate_batch), {len(devs)} devices", devs),
+        ("jaxrb lean DOP853 (simulate_batch), 1 device", devs[:1]),
+    ]
 
 
 def time_jax(fn, *args, repeats=3):

@@ -61,24 +61,27 @@ def sweep(problem, make_scene, states0, ts, error, *, dtypes, quick, splitting_d
         tols = [1e-6, 1e-8, 1e-10, 1e-12] if dname == "float64" else [1e-4, 1e-5, 1e-6]
         if quick:
             tols = tols[::2]
-        lean = jax.jit(
-            lambda s, tol: simulate_batch(scene, s, tsd, rtol=tol, atol=tol, throw=False)
-        )
-        for tol in tols:  # tolerance is a traced argument: one compilation for the sweep
-            first, best, tr = C.time_jax(lean, s0, jnp.asarray(tol, dt))
-            rows.append(
-                C.Row(
-                    problem,
-                    "jaxrb lean DOP853 (simulate_batch)",
-                    dname,
-                    f"tol {tol:.0e}",
-                    n,
-                    error(tr.states),
-                    best / n * 1e6,
-                    first - best,
-                    float(tr.num_steps[0]),
+        for label, devs in C.lean_variants():
+            lean = jax.jit(
+                lambda s, tol: simulate_batch(
+                    scene, s, tsd, rtol=tol, atol=tol, throw=False, devices=devs
                 )
             )
+            for tol in tols:  # tolerance is a traced argument: one compilation for the sweep
+                first, best, tr = C.time_jax(lean, s0, jnp.asarray(tol, dt))
+                rows.append(
+                    C.Row(
+                        problem,
+                        label,
+                        dname,
+                        f"tol {tol:.0e}",
+                        n,
+                        error(tr.states),
+                        best / n * 1e6,
+                        first - best,
+                        float(tr.num_steps[0]),
+                    )
+                )
         for solver_name, solver in (("Dopri8", dfx.Dopri8()), ("Tsit5", dfx.Tsit5())):
             fn = jax.jit(
                 jax.vmap(

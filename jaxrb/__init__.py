@@ -8,6 +8,7 @@ body-embedded (moving) axes, R = R_a(phi1) R_b(phi2) R_c(phi3).
 import importlib.metadata
 
 from . import inertia as inertia
+from ._batched import simulate_batch as simulate_batch
 from ._body import RigidBody as RigidBody
 from ._dynamics import (
     accelerations as accelerations,
@@ -24,6 +25,7 @@ from ._euler import (
     matrix_to_euler as matrix_to_euler,
     quat_to_euler as quat_to_euler,
 )
+from ._exact_flow import torque_free_flow as torque_free_flow
 from ._floor import Floor as Floor
 from ._forces import (
     AbstractForce as AbstractForce,
@@ -69,6 +71,7 @@ from ._shapes import (
     Sphere as Sphere,
 )
 from ._simulate import Trajectory as Trajectory, simulate as simulate
+from ._splitting import simulate_splitting as simulate_splitting
 from ._state import State as State, make_state as make_state
 from ._sweep import grid as grid, random_draws as random_draws, sweep as sweep
 

@@ -6,6 +6,9 @@ right-hand sides such as one rigid body's 13 states that machinery costs more th
 physics. `simulate_batch` integrates the batch as a single set of arrays with leading batch
 axis N: every stage is one call of `jaxrb.vector_field` on (N, ...) arrays, and a batch-wide
 step-size controller (the worst body's error decides) runs in one `jax.lax.while_loop`.
+Only what the scene needs is integrated: when every force is uniform gravity (or there is
+none) and there is no joint, the mass centre's motion is the exact parabola and only the
+rotation (quaternion and body-frame omega) goes through the integrator.
 
 The scheme is Hairer's DOP853 (explicit Runge-Kutta of order 8 with Hairer's 5th- and
 3rd-order error estimators; E. Hairer, S. P. Norsett, G. Wanner, Solving Ordinary
@@ -23,6 +26,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._dynamics import vector_field
+from ._forces import Gravity
+from ._quaternion import quat_normalize
 from ._results import RESULTS
 from ._simulate import Trajectory, _check_concrete_inputs, _coordinates, input_result
 from ._state import State
@@ -151,20 +156,60 @@ _E5 = (
     0.0,
 )
 
+
+class _BallisticFree(eqx.Module):
+    """Coordinates of a free body whose mass centre feels uniform gravity or nothing: the
+    translation is the exact parabola p0 + v0 t + g t^2 / 2, so only the rotation (quat,
+    omega: 7 numbers instead of 13) is integrated. Chosen when every force is `Gravity`
+    (which exerts no moment about the mass centre) and there is no joint."""
+
+    g: jax.Array  # (3,) or (N, 3) world frame, m/s^2
+
+    def reduce(self, state0):
+        return (quat_normalize(state0.quat), state0.omega)
+
+    def expand(self, y, state0):
+        """The state with the *initial* translation (see `translation`)."""
+        quat, omega = y
+        return State(state0.pos, quat_normalize(quat), state0.vel, omega)
+
+    def coordinate_rates(self, y, rates):
+        return (rates.quat, rates.omega)
+
+    def raw_quat_norm(self, y):
+        return jnp.linalg.norm(y[0], axis=-1)
+
+    def translation(self, states0, elapsed):
+        """(pos, vel) of shape (N, T, 3) at times `elapsed` (T,) after the start."""
+        g = self.g.astype(states0.pos.dtype)[..., None, :]
+        dt = elapsed[:, None]
+        pos = states0.pos[:, None, :] + states0.vel[:, None, :] * dt + 0.5 * g * dt**2
+        return pos, states0.vel[:, None, :] + g * dt
+
+
+def _batch_coordinates(scene):
+    """Integration coordinates: rotation only when the translation is ballistic."""
+    if scene.joint is None and all(isinstance(f, Gravity) for f in scene.forces):
+        dtype = jnp.result_type(float)
+        g = sum((f.g for f in scene.forces), jnp.zeros(3, dtype))
+        return _BallisticFree(g)
+    return _coordinates(scene)
+
+
 _SAFETY = 0.9
 _MIN_FACTOR = 0.2
 _MAX_FACTOR = 10.0
 _ERROR_EXPONENT = -1.0 / 8.0
 
 
-def _per_body_sum(tree):
-    """Sum over every axis but the trailing (batch) axis, over all leaves: shape (N,)."""
-    leaves = jax.tree.leaves(tree)
-    return sum(jnp.sum(x.reshape(-1, x.shape[-1]), axis=0) for x in leaves)
+def _per_body_sum(tree, batch_axis):
+    """Sum over every axis but the batch axis (0 or -1), over all leaves: shape (N,)."""
+    leaves = [jnp.moveaxis(x, batch_axis, 0) for x in jax.tree.leaves(tree)]
+    return sum(jnp.sum(x.reshape(x.shape[0], -1), axis=1) for x in leaves)
 
 
-def _per_body_size(tree) -> int:
-    return sum(int(np.prod(x.shape[:-1])) for x in jax.tree.leaves(tree))
+def _per_body_size(tree, batch_axis) -> int:
+    return sum(int(np.prod(np.delete(x.shape, batch_axis))) for x in jax.tree.leaves(tree))
 
 
 def _axpy(y, h, ks, weights):
@@ -198,12 +243,12 @@ def dop853_step(rhs, t, y, h):
     return y_new, err5, err3
 
 
-def _error_norm(y0, y1, err5, err3, h, rtol, atol):
+def _error_norm(y0, y1, err5, err3, h, rtol, atol, batch_axis):
     """Hairer's combined DOP853 error norm per body (shape (N,)); <= 1 means acceptable."""
     scale = jax.tree.map(lambda a, b: atol + rtol * jnp.maximum(jnp.abs(a), jnp.abs(b)), y0, y1)
-    e5 = _per_body_sum(jax.tree.map(lambda e, s: (e / s) ** 2, err5, scale))
-    e3 = _per_body_sum(jax.tree.map(lambda e, s: (e / s) ** 2, err3, scale))
-    n = _per_body_size(y0)
+    e5 = _per_body_sum(jax.tree.map(lambda e, s: (e / s) ** 2, err5, scale), batch_axis)
+    e3 = _per_body_sum(jax.tree.map(lambda e, s: (e / s) ** 2, err3, scale), batch_axis)
+    n = _per_body_size(y0, batch_axis)
     denom = e5 + 0.01 * e3
     safe = jnp.where(denom > 0, denom, 1.0)
     return jnp.where(denom > 0, jnp.abs(h) * e5 / jnp.sqrt(safe * n), 0.0)
@@ -219,6 +264,7 @@ def simulate_batch(
     dt0: float | None = None,
     max_steps: int = 100_000,
     batched_scene: bool = False,
+    devices=None,
     throw: bool = True,
 ) -> Trajectory:
     """Integrate a batch of bodies with one batch-wide adaptive DOP853 loop.
@@ -237,14 +283,20 @@ def simulate_batch(
     - `dt0`: initial step (s); default: Hairer's first-step heuristic, batch-wide.
     - `max_steps`: bound on step attempts (accepted + rejected).
     - `batched_scene`: see `scene`.
+    - `devices`: the batch is split evenly over these devices (padded to a multiple of their
+      number), each part running its own adaptive loop, in parallel; default: all of
+      `jax.local_devices()`. On a CPU JAX shows one device, which runs on one core, unless
+      the process starts with `XLA_FLAGS=--xla_force_host_platform_device_count=K` (set
+      before JAX is imported): then K cores share the batch. The benchmarks set K to the
+      number of cores.
     - `throw`: raise if the input is bad or `max_steps` is hit; else return per-body
       `result` codes.
 
     **Returns:** a `jaxrb.Trajectory` whose `states` leaves have shape (N, T, ...) (as
     `jax.vmap(simulate)` returns), and `result`, `quat_norm_drift`, `num_steps` of shape (N,).
 
-    All bodies take the same steps, so one stiff or fast body sets the step for all: batch
-    bodies of similar time scales together (the benchmarks do).
+    All bodies of a part take the same steps, so one stiff or fast body sets the step for
+    all: batch bodies of similar time scales together (the benchmarks do).
     """
     if scene.floor is not None:
         raise ValueError(
@@ -271,43 +323,99 @@ def simulate_batch(
     # tolerances and the step budget are traced values: changing them does not recompile
     rtol, atol = jnp.asarray(rtol, dtype), jnp.asarray(atol, dtype)
     max_steps = jnp.asarray(max_steps, jnp.int32)
-    traj = _simulate_batch(scene, states0, ts, rtol, atol, dt0, max_steps, batched_scene)
+    devices = list(jax.local_devices() if devices is None else devices)
+    if not devices:
+        raise ValueError("devices must name at least one device")
+    if len(devices) == 1:
+        traj = _simulate_batch(scene, states0, ts, rtol, atol, dt0, max_steps, batched_scene)
+    else:
+        traj = _simulate_sharded(
+            scene, states0, ts, rtol, atol, dt0, max_steps, batched_scene, devices
+        )
     if throw:  # outside the compiled loop: throw=True/False share one compilation
         traj = traj.result.error_if(traj, traj.result != RESULTS.successful)
     return traj
 
 
+def _simulate_sharded(scene, states0, ts, rtol, atol, dt0, max_steps, batched_scene, devices):
+    """`_simulate_batch` on equal parts of the batch, one per device, with `jax.shard_map`."""
+    n = states0.pos.shape[0]
+    pad = (-n) % len(devices)
+
+    def padded(x):  # repeat the last body to fill the last part
+        return jnp.concatenate([x, jnp.repeat(x[-1:], pad, axis=0)]) if pad else x
+
+    mesh = jax.sharding.Mesh(np.array(devices), ("batch",))
+    part, whole = jax.sharding.PartitionSpec("batch"), jax.sharding.PartitionSpec()
+    scene_arrays, scene_rest = eqx.partition(scene, eqx.is_array)
+    if batched_scene:
+        scene_arrays = jax.tree.map(padded, scene_arrays)
+
+    def one_part(states, arrays, rtol, atol, max_steps):
+        scene_part = eqx.combine(arrays, scene_rest)
+        return _simulate_batch(scene_part, states, ts, rtol, atol, dt0, max_steps, batched_scene)
+
+    out_specs = Trajectory(ts=whole, states=part, result=part, quat_norm_drift=part, num_steps=part)
+    traj = jax.shard_map(
+        one_part,
+        mesh=mesh,
+        in_specs=(part, part if batched_scene else whole, whole, whole, whole),
+        out_specs=out_specs,
+        check_vma=False,  # ts comes back identical from every part
+    )(jax.tree.map(padded, states0), scene_arrays, rtol, atol, max_steps)
+    if pad:
+        traj = Trajectory(
+            ts=traj.ts,
+            states=jax.tree.map(lambda x: x[:n], traj.states),
+            result=jax.tree.map(lambda x: x[:n], traj.result),
+            quat_norm_drift=traj.quat_norm_drift[:n],
+            num_steps=traj.num_steps[:n],
+        )
+    return traj
+
+
 @eqx.filter_jit
 def _simulate_batch(scene, states0, ts, rtol, atol, dt0, max_steps, batched_scene):
-    coords = _coordinates(scene)
+    coords = _batch_coordinates(scene)
     n_save = ts.shape[0]
     dtype = ts.dtype
-    scene_axes = 0 if batched_scene else None
-
-    # Structure of arrays: every leaf is (components..., N) with the batch axis LAST, so each
-    # component is one contiguous vector and the right-hand side is a handful of fused
-    # elementwise loops over N. `vector_field` is written for one body and mapped over the
-    # trailing axis with vmap (no per-body Python, no per-step pytree machinery).
-    to_soa = lambda tree: jax.tree.map(lambda x: jnp.moveaxis(x, 0, -1), tree)  # noqa: E731
 
     def rhs_one(t, y, state0, scene_):
         return coords.coordinate_rates(y, vector_field(t, coords.expand(y, state0), scene_))
 
-    rhs_soa = jax.vmap(rhs_one, in_axes=(None, -1, 0, scene_axes), out_axes=-1)
+    if isinstance(coords, _BallisticFree):
+        # Rotation only, no forces in play: Euler's equations and the quaternion kinematics
+        # broadcast over leading axes, so one call on (N, components) arrays evaluates the
+        # whole batch as a few fused loops (measured: 1.4x faster per step than mapping the
+        # one-body function over a batch axis).
+        batch_axis = 0
 
-    def rhs(t, y):
-        return rhs_soa(t, y, states0, scene)
+        def rhs(t, y):
+            return rhs_one(t, y, states0, scene)
+    else:
+        # Any force model or joint: map the one-body right-hand side over the batch (which
+        # every force supports) on a structure of arrays, each leaf (components..., N).
+        batch_axis = -1
+        scene_axes = 0 if batched_scene else None
+        rhs_soa = jax.vmap(rhs_one, in_axes=(None, -1, 0, scene_axes), out_axes=-1)
 
-    y0 = to_soa(coords.reduce(states0))
+        def rhs(t, y):
+            return rhs_soa(t, y, states0, scene)
+
+    y0 = jax.tree.map(lambda x: jnp.moveaxis(x, 0, batch_axis), coords.reduce(states0))
 
     span = ts[-1] - ts[0]
     if dt0 is None:
         # Hairer's heuristic (first part): h = 0.01 |y0| / |f0| in the scaled norm, worst body.
         f0 = rhs(ts[0], y0)
         scale = jax.tree.map(lambda a: atol + rtol * jnp.abs(a), y0)
-        n = _per_body_size(y0)
-        d0 = jnp.sqrt(_per_body_sum(jax.tree.map(lambda a, s: (a / s) ** 2, y0, scale)) / n)
-        d1 = jnp.sqrt(_per_body_sum(jax.tree.map(lambda a, s: (a / s) ** 2, f0, scale)) / n)
+        n = _per_body_size(y0, batch_axis)
+        d0 = jnp.sqrt(
+            _per_body_sum(jax.tree.map(lambda a, s: (a / s) ** 2, y0, scale), batch_axis) / n
+        )
+        d1 = jnp.sqrt(
+            _per_body_sum(jax.tree.map(lambda a, s: (a / s) ** 2, f0, scale), batch_axis) / n
+        )
         h_body = jnp.where((d0 < 1e-5) | (d1 < 1e-5), 1e-6, 0.01 * d0 / jnp.maximum(d1, 1e-30))
         h0 = jnp.min(h_body)
     else:
@@ -327,7 +435,7 @@ def _simulate_batch(scene, states0, ts, rtol, atol, dt0, max_steps, batched_scen
         clipped = h >= remaining
         h_try = jnp.where(clipped, remaining, h)
         y_new, err5, err3 = dop853_step(rhs, t, y, h_try)
-        err = jnp.max(_error_norm(y, y_new, err5, err3, h_try, rtol, atol))
+        err = jnp.max(_error_norm(y, y_new, err5, err3, h_try, rtol, atol, batch_axis))
         err = jnp.where(jnp.isfinite(err), err, jnp.inf)
         ok = (err <= 1.0) | (remaining <= 0)
         factor = jnp.where(
@@ -358,10 +466,13 @@ def _simulate_batch(scene, states0, ts, rtol, atol, dt0, max_steps, batched_scen
     carry0 = (ts[0], h0, y0, buffer, jnp.asarray(1, jnp.int32), zero, zero)
     _, _, _, ys, idx, attempts, accepted = jax.lax.while_loop(cond, body, carry0)
 
-    n_batch = jax.tree.leaves(y0)[0].shape[-1]
-    # ys leaves: (T, components..., N) -> (N, T, components...)
-    ys = jax.tree.map(lambda x: jnp.moveaxis(x, -1, 0), ys)
+    n_batch = jax.tree.leaves(y0)[0].shape[batch_axis]
+    # ys leaves: (T, N, components...) or (T, components..., N) -> (N, T, components...)
+    ys = jax.tree.map(lambda x: jnp.moveaxis(x, 1 if batch_axis == 0 else -1, 0), ys)
     states = jax.vmap(jax.vmap(coords.expand, in_axes=(0, None)), in_axes=(0, 0))(ys, states0)
+    if isinstance(coords, _BallisticFree):
+        pos, vel = coords.translation(states0, ts - ts[0])
+        states = State(pos, states.quat, vel, states.omega)
     raw = jax.vmap(jax.vmap(coords.raw_quat_norm))(ys)
     drift = jnp.broadcast_to(jnp.max(jnp.abs(raw - 1), axis=1), (n_batch,))
     # Input checks cover the whole batch (the first problem found is reported for every body);

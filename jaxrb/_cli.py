@@ -414,27 +414,17 @@ def _benchmarks_dir() -> Path | None:
 
 
 def cmd_bench(args) -> int:
-    import runpy
+    import subprocess
 
     d = _benchmarks_dir()
     if d is None:
         raise CLIError("benchmarks/ not found: `jaxrb bench` runs from a source checkout of jaxrb")
-    for name in ("report.py", "run_all.py", "__main__.py"):
-        script = d / name
-        if script.exists():
-            break
-    else:
-        raise CLIError(f"no benchmark report script in {d} (expected report.py or run_all.py)")
-    old_argv, old_path = sys.argv, list(sys.path)
-    sys.argv = [str(script), *args.bench_args]
-    sys.path.insert(0, str(d.parent))
-    try:
-        runpy.run_path(str(script), run_name="__main__")
-    except SystemExit as e:
-        return int(e.code or 0) if not isinstance(e.code, str) else 1
-    finally:
-        sys.argv, sys.path[:] = old_argv, old_path
-    return 0
+    if not (d / "run_all.py").exists():
+        raise CLIError(f"no benchmark report script in {d} (expected run_all.py)")
+    # a fresh process: the benchmarks package sets up one JAX host device per CPU core, which
+    # only takes effect before JAX starts (this process has started it already)
+    cmd = [sys.executable, "-m", f"{d.name}.run_all", *args.bench_args]
+    return subprocess.run(cmd, cwd=d.parent).returncode
 
 
 # ---------------------------------------------------------------------------------------------
