@@ -41,14 +41,22 @@ def device_name() -> str:
     return f"{d.platform}:{getattr(d, 'device_kind', '?')}{more}"
 
 
-def lean_variants():
-    """(label, devices) for `simulate_batch`: all devices, and one device when there are more."""
+def lean_variants(scene):
+    """(label, devices) for `simulate_batch`: all devices, and one device when there are more;
+    the label marks the one `simulate_batch` picks by default for this scene."""
+    from jaxrb._batched import _default_devices
+
     devs = jax.devices()
     if len(devs) == 1:
         return [("jaxrb lean DOP853 (simulate_batch)", devs)]
+    default = len(_default_devices(scene))
     return [
-        (f"jaxrb lean DOP853 (simulate_batch), {len(devs)} devices", devs),
-        ("jaxrb lean DOP853 (simulate_batch), 1 device", devs[:1]),
+        (
+            f"jaxrb lean DOP853 (simulate_batch), {k} device{'s' if k > 1 else ''}"
+            + (" (default)" if k == default else ""),
+            devs[:k],
+        )
+        for k in (len(devs), 1)
     ]
 
 

@@ -133,11 +133,15 @@ assert float(jnp.max(jnp.abs(two.states.omega - w_exact))) < 1e-9
 assert float(jnp.max(jaxrb.quat_geodesic_angle(two.states.quat, one.states.quat))) < 1e-9
 np.testing.assert_array_equal(np.asarray(two.states.pos), np.asarray(one.states.pos))
 assert bool(jnp.all(two.result == jaxrb.RESULTS.successful))
-# a jointed scene (the mapped right-hand side) splits the same way
+# a jointed scene (the mapped right-hand side) stays on one CPU device unless asked
+from jaxrb._batched import _default_devices
+assert len(_default_devices(scene)) == 2
 top = jaxrb.Scene(jaxrb.RigidBody(1.0, jnp.array([0.5, 0.5, 0.2])), forces=(jaxrb.Gravity(),),
                   joint=jaxrb.Pivot((0.0, 0.0, -0.5)))
+assert len(_default_devices(top)) == 1
 spin = states.omega.at[:, 2].add(20.0)
-a = simulate_batch(top, jaxrb.make_state(omega=spin), ts[:2], rtol=1e-11, atol=1e-11)
+a = simulate_batch(top, jaxrb.make_state(omega=spin), ts[:2], rtol=1e-11, atol=1e-11,
+                   devices=jax.devices())
 b = simulate_batch(top, jaxrb.make_state(omega=spin), ts[:2], rtol=1e-11, atol=1e-11,
                    devices=jax.devices()[:1])
 assert float(jnp.max(jnp.abs(a.states.omega - b.states.omega))) < 1e-8
