@@ -41,7 +41,7 @@ def device_name() -> str:
     return f"{d.platform}:{getattr(d, 'device_kind', '?')}{more}"
 
 
-def lean_variants(scene):
+def lean_variants(scene, n_bodies):
     """(label, devices) for `simulate_batch`: all devices, and one device when there are more;
     the label marks the one `simulate_batch` picks by default for this scene."""
     from jaxrb._batched import _default_devices
@@ -49,7 +49,7 @@ def lean_variants(scene):
     devs = jax.devices()
     if len(devs) == 1:
         return [("jaxrb lean DOP853 (simulate_batch)", devs)]
-    default = len(_default_devices(scene))
+    default = len(_default_devices(scene, n_bodies))
     return [
         (
             f"jaxrb lean DOP853 (simulate_batch), {k} device{'s' if k > 1 else ''}"

@@ -61,7 +61,7 @@ def sweep(problem, make_scene, states0, ts, error, *, dtypes, quick, splitting_d
         tols = [1e-6, 1e-8, 1e-10, 1e-12] if dname == "float64" else [1e-4, 1e-5, 1e-6]
         if quick:
             tols = tols[::2]
-        for label, devs in C.lean_variants(scene):
+        for label, devs in C.lean_variants(scene, n):
             lean = jax.jit(
                 lambda s, tol: simulate_batch(
                     scene, s, tsd, rtol=tol, atol=tol, throw=False, devices=devs

@@ -119,7 +119,7 @@ def run(n=1000, dtypes=("float64", "float32"), n_python=10, quick=False, scaling
         tols = [1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11] if dname == "float64" else [1e-4, 1e-5, 1e-6]
         if quick:
             tols = tols[1::2]
-        for label, devs in C.lean_variants(scene):
+        for label, devs in C.lean_variants(scene, n):
             lean = jax.jit(
                 lambda s, tol: simulate_batch(
                     scene, s, ts, rtol=tol, atol=tol, throw=False, devices=devs
@@ -352,14 +352,15 @@ def scaling_points(quick):
     sizes = [1, 10, 100, 1000, 10000, 100000] if not quick else [100, 1000]
     for n in sizes:
         s = jaxrb.make_state(omega=initial_omegas(n, seed=1))
-        for label, devs in C.lean_variants(scene):
+        for label, devs in C.lean_variants(scene, n):
             f_lean = jax.jit(
                 lambda s: simulate_batch(
                     scene, s, ts, rtol=1e-10, atol=1e-10, throw=False, devices=devs
                 )
             )
             _, best, _ = C.time_jax(f_lean, s, repeats=2)
-            pts.append((label.replace("(simulate_batch)", "tol 1e-10"), n, best / n * 1e6))
+            label = label.replace("(simulate_batch)", "tol 1e-10").replace(" (default)", "")
+            pts.append((label, n, best / n * 1e6))
         f_dfx = jax.jit(
             jax.vmap(
                 lambda s: jaxrb.simulate(

@@ -288,10 +288,11 @@ def simulate_batch(
       `jax.local_devices()` on GPUs; on a CPU, all of them for a free body under gravity
       only (whose right-hand side runs on one core per device) and the first one otherwise
       (the general path's compiled code already spreads over the cores: measured on 2 cores,
-      splitting it made the heavy top 1.25x slower). On a CPU JAX shows one device unless the
-      process starts with `XLA_FLAGS=--xla_force_host_platform_device_count=K` (set before
-      JAX is imported): then K cores can share the batch. The benchmarks set K to the number
-      of cores.
+      splitting it made the heavy top 1.25x slower); in either case at most one device per
+      50 bodies (measured: 10 bodies on 2 CPU devices took 1.4x longer than on one). On a
+      CPU, JAX shows one device unless the process starts with
+      `XLA_FLAGS=--xla_force_host_platform_device_count=K` (set before JAX is imported):
+      then K cores can share the batch. The benchmarks set K to the number of cores.
     - `throw`: raise if the input is bad or `max_steps` is hit; else return per-body
       `result` codes.
 
@@ -326,7 +327,8 @@ def simulate_batch(
     # tolerances and the step budget are traced values: changing them does not recompile
     rtol, atol = jnp.asarray(rtol, dtype), jnp.asarray(atol, dtype)
     max_steps = jnp.asarray(max_steps, jnp.int32)
-    devices = list(_default_devices(scene) if devices is None else devices)
+    n_bodies = states0.pos.shape[0]
+    devices = list(_default_devices(scene, n_bodies) if devices is None else devices)
     if not devices:
         raise ValueError("devices must name at least one device")
     if len(devices) == 1:
@@ -340,11 +342,14 @@ def simulate_batch(
     return traj
 
 
-def _default_devices(scene):
+_MIN_BODIES_PER_DEVICE = 50  # below this, a part's fixed per-step cost outweighs the split
+
+
+def _default_devices(scene, n_bodies):
     devices = jax.local_devices()
     if devices[0].platform == "cpu" and not isinstance(_batch_coordinates(scene), _BallisticFree):
         return devices[:1]
-    return devices
+    return devices[: max(1, min(len(devices), n_bodies // _MIN_BODIES_PER_DEVICE))]
 
 
 def _simulate_sharded(scene, states0, ts, rtol, atol, dt0, max_steps, batched_scene, devices):

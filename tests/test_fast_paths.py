@@ -126,7 +126,7 @@ states = jaxrb.make_state(quat=jnp.tile(jnp.array([1.0, 0, 0, 0]), (5, 1)),
 ts = jnp.array([0.0, 3.0, 6.0])
 scene = jaxrb.Scene(jaxrb.RigidBody(1.0, inertia), forces=(jaxrb.Gravity(),))
 w_exact = jax.vmap(lambda w: asymmetric_top(ts, inertia, w))(states.omega)
-two = simulate_batch(scene, states, ts, rtol=1e-11, atol=1e-11)  # 5 bodies on 2 devices
+two = simulate_batch(scene, states, ts, rtol=1e-11, atol=1e-11, devices=jax.devices())
 one = simulate_batch(scene, states, ts, rtol=1e-11, atol=1e-11, devices=jax.devices()[:1])
 assert two.states.omega.shape == (5, 3, 3) and two.result._value.shape == (5,)
 assert float(jnp.max(jnp.abs(two.states.omega - w_exact))) < 1e-9
@@ -135,10 +135,10 @@ np.testing.assert_array_equal(np.asarray(two.states.pos), np.asarray(one.states.
 assert bool(jnp.all(two.result == jaxrb.RESULTS.successful))
 # a jointed scene (the mapped right-hand side) stays on one CPU device unless asked
 from jaxrb._batched import _default_devices
-assert len(_default_devices(scene)) == 2
+assert len(_default_devices(scene, 5)) == 1  # too few bodies to split by default
 top = jaxrb.Scene(jaxrb.RigidBody(1.0, jnp.array([0.5, 0.5, 0.2])), forces=(jaxrb.Gravity(),),
                   joint=jaxrb.Pivot((0.0, 0.0, -0.5)))
-assert len(_default_devices(top)) == 1
+assert len(_default_devices(scene, 100)) == 2 and len(_default_devices(top, 100)) == 1
 spin = states.omega.at[:, 2].add(20.0)
 a = simulate_batch(top, jaxrb.make_state(omega=spin), ts[:2], rtol=1e-11, atol=1e-11,
                    devices=jax.devices())
