@@ -423,7 +423,10 @@ def cmd_bench(args) -> int:
         raise CLIError(f"no benchmark report script in {d} (expected run_all.py)")
     # a fresh process: the benchmarks package sets up one JAX host device per CPU core, which
     # only takes effect before JAX starts (this process has started it already)
-    cmd = [sys.executable, "-m", f"{d.name}.run_all", *args.bench_args]
+    bench_args = list(args.bench_args)
+    if bench_args[:1] == ["--"]:  # `jaxrb bench -- --help`
+        bench_args = bench_args[1:]
+    cmd = [sys.executable, "-m", f"{d.name}.run_all", *bench_args]
     return subprocess.run(cmd, cwd=d.parent).returncode
 
 
@@ -525,7 +528,11 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     """Entry point of the `jaxrb` console script (and `python -m jaxrb`); returns the exit code."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, unknown = parser.parse_known_args(argv)
+    if args.command == "bench":  # everything after `bench` belongs to the report script
+        args.bench_args = [*unknown, *args.bench_args]
+    elif unknown:
+        parser.error(f"unrecognized arguments: {' '.join(unknown)}")
     if args.command is None:
         parser.print_help()
         return 2

@@ -174,6 +174,15 @@ def test_help(command, capsys):
         assert "START:STOP:NUM" in out
 
 
+def test_bench_passes_its_options_to_the_report(capfd):
+    """`jaxrb bench OPTIONS` runs benchmarks/run_all.py in a fresh process with OPTIONS (a
+    report script's option errors come back as its exit code, jaxrb's own are not raised)."""
+    assert main(["bench", "--", "--help"]) == 0
+    assert "usage: run_all.py" in capfd.readouterr().out
+    assert main(["bench", "--no-such-option"]) == 2
+    assert "unrecognized arguments: --no-such-option" in capfd.readouterr().err
+
+
 def test_show_default(capsys):
     assert main(["run", "--show-default"]) == 0
     out = capsys.readouterr().out
