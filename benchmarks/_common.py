@@ -60,6 +60,40 @@ def lean_variants(scene, n_bodies):
     ]
 
 
+def lean_rows(problem, scene, states0, ts, tols, dname, error_of):
+    """Rows of `simulate_batch` over the tolerances `tols`, one sweep per `lean_variants`
+    (the tolerance is a traced argument: one compilation per sweep). `error_of(trajectory)`
+    gives the row's error."""
+    import jax.numpy as jnp
+
+    from jaxrb._batched import simulate_batch
+
+    n = states0.omega.shape[0]
+    rows = []
+    for label, devs in lean_variants(scene, n):
+        lean = jax.jit(
+            lambda s, tol: simulate_batch(
+                scene, s, ts, rtol=tol, atol=tol, throw=False, devices=devs
+            )
+        )
+        for tol in tols:
+            first, best, tr = time_jax(lean, states0, jnp.asarray(tol, ts.dtype))
+            rows.append(
+                Row(
+                    problem,
+                    label,
+                    dname,
+                    f"tol {tol:.0e}",
+                    n,
+                    error_of(tr),
+                    best / n * 1e6,
+                    first - best,
+                    float(tr.num_steps[0]),
+                )
+            )
+    return rows
+
+
 def time_jax(fn, *args, repeats=3):
     """(first-call seconds, best steady seconds, result) of fn(*args), blocking on the result."""
     t0 = time.perf_counter()

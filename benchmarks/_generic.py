@@ -11,7 +11,6 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxrb
-from jaxrb._batched import simulate_batch
 from jaxrb._splitting import simulate_splitting
 
 try:
@@ -61,27 +60,7 @@ def sweep(problem, make_scene, states0, ts, error, *, dtypes, quick, splitting_d
         tols = [1e-6, 1e-8, 1e-10, 1e-12] if dname == "float64" else [1e-4, 1e-5, 1e-6]
         if quick:
             tols = tols[::2]
-        for label, devs in C.lean_variants(scene, n):
-            lean = jax.jit(
-                lambda s, tol: simulate_batch(
-                    scene, s, tsd, rtol=tol, atol=tol, throw=False, devices=devs
-                )
-            )
-            for tol in tols:  # tolerance is a traced argument: one compilation for the sweep
-                first, best, tr = C.time_jax(lean, s0, jnp.asarray(tol, dt))
-                rows.append(
-                    C.Row(
-                        problem,
-                        label,
-                        dname,
-                        f"tol {tol:.0e}",
-                        n,
-                        error(tr.states),
-                        best / n * 1e6,
-                        first - best,
-                        float(tr.num_steps[0]),
-                    )
-                )
+        rows += C.lean_rows(problem, scene, s0, tsd, tols, dname, lambda tr: error(tr.states))
         for solver_name, solver in (("Dopri8", dfx.Dopri8()), ("Tsit5", dfx.Tsit5())):
             fn = jax.jit(
                 jax.vmap(

@@ -119,27 +119,15 @@ def run(n=1000, dtypes=("float64", "float32"), n_python=10, quick=False, scaling
         tols = [1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11] if dname == "float64" else [1e-4, 1e-5, 1e-6]
         if quick:
             tols = tols[1::2]
-        for label, devs in C.lean_variants(scene, n):
-            lean = jax.jit(
-                lambda s, tol: simulate_batch(
-                    scene, s, ts, rtol=tol, atol=tol, throw=False, devices=devs
-                )
-            )
-            for tol in tols:  # tolerance is a traced argument: one compilation for the sweep
-                first, best, tr = C.time_jax(lean, states0, jnp.asarray(tol, dt))
-                rows.append(
-                    C.Row(
-                        "B1",
-                        label,
-                        dname,
-                        f"tol {tol:.0e}",
-                        n,
-                        error(tr.states.omega[:, -1], tr.states.quat[:, -1]),
-                        best / n * 1e6,
-                        first - best,
-                        float(tr.num_steps[0]),
-                    )
-                )
+        rows += C.lean_rows(
+            "B1",
+            scene,
+            states0,
+            ts,
+            tols,
+            dname,
+            lambda tr: error(tr.states.omega[:, -1], tr.states.quat[:, -1]),
+        )
         # plain vmap of diffrax Dopri8 / Tsit5 through jaxrb.simulate
         for solver_name, solver in (("Dopri8", dfx.Dopri8()), ("Tsit5", dfx.Tsit5())):
             tols = [1e-7, 1e-8, 1e-9, 1e-10] if dname == "float64" else [1e-5, 1e-6]
