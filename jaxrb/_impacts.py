@@ -159,6 +159,14 @@ def _effective_inverse_mass(mass, inv_inertia_world, r):
     return jnp.eye(3, dtype=r.dtype) / mass - S @ inv_inertia_world @ S
 
 
+def _apply_impulse(body, state, R, inv_iw, r, j):
+    """The state after impulse j (N s, world) at offset r (m, world) from the mass centre;
+    R = R(q), inv_iw the world-frame inverse inertia."""
+    vel = state.vel + j / body.mass
+    omega = R.T @ (R @ state.omega + inv_iw @ jnp.cross(r, j))
+    return State(state.pos, state.quat, vel, omega)
+
+
 def impact_map(body, state: State, point, restitution, friction=0.0):
     """Newton's impact law with Coulomb friction at one contact point on the floor (normal +z).
 
@@ -205,9 +213,7 @@ def impact_map(body, state: State, point, restitution, friction=0.0):
     j = jnp.where(stick_ok, j_stick, jnp.where(slide_ok, j_slide, j_free))
     j = jnp.where(un < 0, j, zero)
     lost = -gain(j)
-    vel = state.vel + j / body.mass
-    omega = R.T @ (w + inv_iw @ jnp.cross(r, j))
-    return State(state.pos, state.quat, vel, omega), j, lost
+    return _apply_impulse(body, state, R, inv_iw, r, j), j, lost
 
 
 def _unit(state):
@@ -321,9 +327,7 @@ def _zero_slip(scene, state):
     s = _contact_slip(scene, state)
     j_t = jnp.linalg.solve(K[:2, :2], -s[:2])
     j = jnp.concatenate([j_t, jnp.zeros_like(j_t[:1])])
-    vel = state.vel + j / body.mass
-    omega = R.T @ (R @ state.omega + inv_iw @ jnp.cross(r, j))
-    return State(state.pos, state.quat, vel, omega)
+    return _apply_impulse(body, state, R, inv_iw, r, j)
 
 
 def _rates(t, y, args, scene):
