@@ -590,7 +590,7 @@ def _simulate_impacts(
         mode = jnp.where(do, mode_i, jnp.where(is_stop, STICK, mode))
         return y, mode, records, too_many
 
-    def slip0_and_shift(y, mode):
+    def slip0_and_shift(y):
         y = _unit(y)
         slip0 = _contact_slip(scene, y)
         slip0_dir = slip0 / jnp.maximum(_safe_norm(slip0), jnp.finfo(dtype).tiny)
@@ -630,7 +630,7 @@ def _simulate_impacts(
     def segment(carry, _):
         done, mode, y = carry["done"], carry["mode"], carry["y"]
         t0 = jnp.where(done, t_end, carry["t"])
-        slip0_dir, shift = slip0_and_shift(y, mode)
+        slip0_dir, shift = slip0_and_shift(y)
         sol = dfx.diffeqsolve(
             term,
             solver,
