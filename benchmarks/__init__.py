@@ -1,4 +1,4 @@
-"""Benchmarks B1-B4 of SPEC.md section 4 (see README.md here).
+"""Benchmarks B1-B4 and the contact throws study (see benchmarks/README.md).
 
 On a CPU, JAX shows one device, which computes on one core. Importing this package before JAX
 asks for one host device per core (unless XLA_FLAGS already sets a count), so that

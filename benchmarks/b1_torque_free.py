@@ -47,7 +47,7 @@ def scene_for(dtype):
 
 
 def reference_attitude(omega0, tol=1e-13):
-    """q(T) from diffrax Dopri8 at rtol = atol = `tol` in float64 (SPEC's reference: 1e-13)."""
+    """q(T) from diffrax Dopri8 at rtol = atol = `tol` in float64 (the reference: 1e-13)."""
     return jax.jit(
         jax.vmap(
             lambda w: jaxrb.simulate(
@@ -179,7 +179,7 @@ def run(n=1000, dtypes=("float64", "float32"), n_python=10, quick=False, scaling
 
             fn = jax.jit(lambda s: torque_free_flow(jnp.asarray(INERTIA, dt), s, T_END))
             first, best, out = C.time_jax(fn, states0)
-            # SPEC's 1e-13 reference attitude is itself off by ~1e-12 at T = 20, the size of
+            # the 1e-13 reference attitude is itself off by ~1e-12 at T = 20, the size of
             # this row's error: compare with a finer reference too
             fine = reference_attitude(omega0, 1e-15)
             q_out = jnp.asarray(out.quat, jnp.float64)

@@ -27,10 +27,12 @@ import numpy as np
 
 from ._dynamics import vector_field
 from ._forces import Gravity
+from ._inputs import check_concrete_inputs, input_result
 from ._quaternion import quat_normalize
 from ._results import RESULTS
-from ._simulate import Trajectory, _check_concrete_inputs, _coordinates, input_result
+from ._simulate import _coordinates
 from ._state import State
+from ._trajectory import Trajectory
 
 # Hairer's DOP853 tableau (12 stages), the 5th- and 3rd-order error weights.
 _C = (
@@ -323,7 +325,7 @@ def simulate_batch(
         raise ValueError(f"ts must be a 1-D array of save times, got shape {ts.shape}")
     ts = ts.astype(dtype)
     states0 = jax.tree.map(lambda x: jnp.asarray(x, dtype), states0)
-    _check_concrete_inputs(states0, ts)
+    check_concrete_inputs(states0, ts)
     # tolerances and the step budget are traced values: changing them does not recompile
     rtol, atol = jnp.asarray(rtol, dtype), jnp.asarray(atol, dtype)
     max_steps = jnp.asarray(max_steps, jnp.int32)

@@ -5,9 +5,10 @@ in rad means successive rotations about the body-embedded (moving) axes:
 
     R = R_a(phi1) R_b(phi2) R_c(phi3),
 
-with the elementary rotations R_1, R_2, R_3 of THEORY.md. R maps body to world (r_world = R
-r_body). This equals scipy's `Rotation.from_euler(seq, angles)` with `seq` the uppercase
-(intrinsic) letters, e.g. "313" -> "ZXZ". Classical Euler angles (psi, theta, phi) are "313".
+with the elementary rotations R_1, R_2, R_3 of docs/theory.md, section 2.1. R maps body to world
+(r_world = R r_body). This equals scipy's `Rotation.from_euler(seq, angles)` with `seq` the
+uppercase (intrinsic) letters, e.g. "313" -> "ZXZ". Classical Euler angles (psi, theta, phi) are
+"313".
 
 Ranges returned by `matrix_to_euler` / `quat_to_euler`: phi1, phi3 in (-pi, pi]; phi2 in
 [0, pi] for the proper sequences (a == c: 121 131 212 232 313 323) and in [-pi/2, pi/2] for the

@@ -5,7 +5,7 @@ anchor is where that point is in the initial state. A jointed body is integrated
 coordinates (attitude and angular velocity for a pivot, one angle and its rate for a hinge);
 `expand` turns those back into a full `State`.
 
-Dynamics about the fixed point O (THEORY.md, general form with v_O = 0):
+Dynamics about the fixed point O (docs/theory.md, section 4.4, i.e. section 4.3 with v_O = 0):
 J_O w_dot + w x J_O w = M_O, with J_O = J_C + m (|r|^2 1 - r r^T) and r = C - O (body);
 the mass centre then accelerates as a_C = R (w_dot x r + w x (w x r)).
 """

@@ -1,4 +1,4 @@
-"""Quaternion-rate relations (THEORY.md "Rates", eqs. 2.37-2.40).
+"""Quaternion-rate relations (docs/theory.md, section 2.5).
 
 Convention: q = (e0, e1, e2, e3), scalar first, a unit quaternion mapping body to world
 (r_world = R(q) r_body). `omega_body` has components on the body-embedded axes, `omega_world`

@@ -21,6 +21,7 @@ class RESULTS(dfx.RESULTS):  # pyright: ignore
     invalid_restitution = "the floor's restitution must be in [0, 1]."
     invalid_friction = "the floor's friction coefficient must be finite and >= 0."
     max_impacts_reached = "the maximum number of impacts was reached before the end time."
+    max_events_reached = "the maximum number of contact events was reached before the end time."
     starts_below_floor = (
         "the body starts below the floor (its lowest point is under the floor plane)."
     )

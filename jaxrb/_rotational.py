@@ -2,6 +2,8 @@
 
 import jax.numpy as jnp
 
+from ._linalg import inverse3
+
 
 def angular_acceleration(inertia, principal: bool, omega, moment):
     """Body-frame w_dot (rad/s^2) from J w_dot = M - w x (J w).
@@ -17,4 +19,4 @@ def angular_acceleration(inertia, principal: bool, omega, moment):
         return (moment - jnp.cross(omega, inertia * omega)) / inertia
     J_omega = jnp.einsum("...ij,...j->...i", inertia, omega)
     rhs = moment - jnp.cross(omega, J_omega)
-    return jnp.linalg.solve(inertia, rhs[..., None])[..., 0]
+    return jnp.einsum("...ij,...j->...i", inverse3(inertia), rhs)

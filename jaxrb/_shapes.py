@@ -1,4 +1,5 @@
-"""Body shapes: geometry for inertia and for contact with the floor.
+"""Body shapes: geometry for inertia, plots and the lowest point; their contact features
+(points, edges, faces) are in `jaxrb.contact` (one table entry per shape).
 
 Every shape is centred on the body's mass centre and aligned with the body axes.
 """
@@ -30,33 +31,14 @@ class AbstractShape(eqx.Module):
         down_in_body = quat_rotate(quat_conjugate(quat), jnp.array([0.0, 0.0, -1.0], quat.dtype))
         return self.support_point(down_in_body)
 
-    def contact_candidates(self, quat: Quat) -> jnp.ndarray:
-        """Body-frame points (..., K, 3) among which the lowest point at attitude `quat` lies.
-
-        A fixed, small set (the sphere's lowest point, a box's 8 corners, the lowest rim point
-        of each of a cylinder's two end caps): the floor is touched first at one of them.
-        """
-        return self.lowest_point(quat)[..., None, :]
-
-    def candidate_heights(self, pos: Vec3, quat: Quat, height=0.0) -> jnp.ndarray:
-        """World heights (m) above the floor z = `height` of the `contact_candidates`, (..., K)."""
-        points = self.contact_candidates(quat)
-        world = quat_rotate(quat[..., None, :], points)
-        return pos[..., None, 2] + world[..., 2] - height
-
     def floor_distance(self, pos: Vec3, quat: Quat, height=0.0) -> jnp.ndarray:
         """Signed distance (m) of the solid's lowest point above the floor z = `height`.
 
         Negative when the solid penetrates the floor. `pos` is the mass centre (world frame),
         `quat` the unit attitude quaternion (scalar first, body to world).
         """
-        return jnp.min(self.candidate_heights(pos, quat, height), axis=-1)
-
-    def rest_faces(self):
-        """Flat faces the solid can rest on: (outward unit normals (F, 3) body frame, distances
-        (F,) from the mass centre to each face plane, face radii (F,) bounding each face about
-        its centre), or None for a solid with no flat face (a sphere)."""
-        return None
+        lowest = quat_rotate(quat, self.lowest_point(quat))
+        return pos[..., 2] + lowest[..., 2] - height
 
 
 class Sphere(AbstractShape):
@@ -102,17 +84,6 @@ class Box(AbstractShape):
         )
         return signs * self.half_extents[..., None, :]
 
-    def contact_candidates(self, quat):
-        return jnp.broadcast_to(self.corners(), quat.shape[:-1] + (8, 3))
-
-    def rest_faces(self):
-        a = self.half_extents
-        eye = jnp.eye(3, dtype=a.dtype)
-        normals = jnp.concatenate([eye, -eye], axis=0)
-        offsets = jnp.concatenate([a, a], axis=-1)
-        radii = jnp.sqrt(jnp.sum(a**2) - a**2)
-        return normals, offsets, jnp.concatenate([radii, radii], axis=-1)
-
 
 class Cylinder(AbstractShape):
     """A solid cylinder (a coin when short) with symmetry axis body z (m)."""
@@ -133,20 +104,3 @@ class Cylinder(AbstractShape):
         rim = self.radius * radial / jnp.where(n > 0, n, 1.0)
         z = jnp.where(direction[..., 2:] >= 0, 1.0, -1.0) * self.half_height
         return jnp.concatenate([rim, z], axis=-1)
-
-    def contact_candidates(self, quat):
-        down = quat_rotate(quat_conjugate(quat), jnp.array([0.0, 0.0, -1.0], quat.dtype))
-        radial = down[..., :2]
-        n = _safe_norm(radial, keepdims=True)
-        rim = self.radius * radial / jnp.where(n > 0, n, 1.0)
-        top = jnp.concatenate([rim, jnp.broadcast_to(self.half_height, rim.shape[:-1] + (1,))], -1)
-        bottom = jnp.concatenate(
-            [rim, -jnp.broadcast_to(self.half_height, rim.shape[:-1] + (1,))], -1
-        )
-        return jnp.stack([top, bottom], axis=-2)
-
-    def rest_faces(self):
-        dtype = self.radius.dtype
-        normals = jnp.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]], dtype)
-        offsets = jnp.stack([self.half_height, self.half_height])
-        return normals, offsets, jnp.stack([self.radius, self.radius])

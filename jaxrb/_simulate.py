@@ -4,41 +4,20 @@ import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 
-from . import inertia as _inertia
-from ._checks import as_float_array, is_concrete
+from ._checks import as_float_array
 from ._dynamics import vector_field
+from ._inputs import check_concrete_inputs, input_result
 from ._quaternion import quat_normalize
 from ._results import RESULTS
 from ._state import State
+from ._trajectory import Trajectory
+from .contact import ContactOptions
+from .contact._driver import simulate_contact
 
 DEFAULT_RTOL = 1e-8
 DEFAULT_ATOL = 1e-8
 DEFAULT_MAX_STEPS = 100_000
-
-
-class Trajectory(eqx.Module):
-    """The result of `simulate`.
-
-    **Fields:**
-
-    - `ts`: save times (s), shape (T,).
-    - `states`: a `State` whose leaves have a leading time axis (T, ...); unit quaternions.
-    - `result`: a `jaxrb.RESULTS` code (per batch member under vmap);
-      `RESULTS.successful` if all went well.
-    - `quat_norm_drift`: max over the save times of ||q| - 1| before normalisation: how far
-      the integrator let the quaternion norm wander (the exact flow keeps it at 1).
-    - `num_steps`: accepted solver steps.
-    - `impacts`: impact records for scenes with a floor, else None.
-    """
-
-    ts: jax.Array
-    states: State
-    result: RESULTS
-    quat_norm_drift: jax.Array
-    num_steps: jax.Array
-    impacts: object = None
 
 
 class _Free(eqx.Module):
@@ -61,46 +40,6 @@ def _coordinates(scene):
     return _Free() if scene.joint is None else scene.joint
 
 
-def input_result(scene, state0: State, ts) -> RESULTS:
-    """The first bad-input problem found (traceable), or `RESULTS.successful`."""
-    body = scene.body
-    checks = [
-        (jnp.all(jnp.isfinite(body.mass) & (body.mass > 0)), RESULTS.invalid_mass),
-        (_inertia.is_valid_inertia(body.inertia_matrix), RESULTS.invalid_inertia),
-        (
-            jnp.all(jnp.array([jnp.all(jnp.isfinite(x)) for x in jax.tree.leaves(state0)])),
-            RESULTS.nonfinite_state,
-        ),
-        (jnp.all(jnp.linalg.norm(state0.quat, axis=-1) > 0), RESULTS.zero_quaternion),
-        (jnp.all(jnp.diff(ts) >= 0), RESULTS.decreasing_times),
-    ]
-    if scene.floor is not None:
-        e, mu = scene.floor.restitution, scene.floor.friction
-        checks.append((jnp.all((e >= 0) & (e <= 1)), RESULTS.invalid_restitution))
-        checks.append((jnp.all(jnp.isfinite(mu) & (mu >= 0)), RESULTS.invalid_friction))
-    result = RESULTS.successful
-    for ok, code in reversed(checks):
-        result = RESULTS.where(jnp.all(ok), result, code)
-    return result
-
-
-def _check_concrete_inputs(state0: State, ts) -> None:
-    """Raise ValueError early for concrete bad input (outside jit), naming the problem."""
-    if is_concrete(ts):
-        t = np.asarray(ts)
-        if not np.all(np.isfinite(t)):
-            raise ValueError("ts contains non-finite values")
-        if np.any(np.diff(t) < 0):
-            raise ValueError("ts must be non-decreasing (t1 < t0 is not allowed)")
-    for name in ("pos", "quat", "vel", "omega"):
-        x = getattr(state0, name)
-        if is_concrete(x):
-            if not np.all(np.isfinite(np.asarray(x))):
-                raise ValueError(f"state0.{name} contains non-finite values (NaN or inf)")
-    if is_concrete(state0.quat) and np.any(np.linalg.norm(np.asarray(state0.quat), axis=-1) == 0):
-        raise ValueError("state0.quat has zero norm")
-
-
 def simulate(
     scene,
     state0: State,
@@ -115,8 +54,9 @@ def simulate(
     adjoint: dfx.AbstractAdjoint | None = None,
     progress_meter: dfx.AbstractProgressMeter | None = None,
     throw: bool = True,
-    max_impacts: int = 64,
-    rest_speed: float = 1e-2,
+    max_impacts: int | None = None,
+    rest_speed: float | None = None,
+    contact: ContactOptions | None = None,
 ) -> Trajectory:
     """Integrate `scene` from `state0` at time `ts[0]` and save at the times `ts`.
 
@@ -140,10 +80,11 @@ def simulate(
     - `progress_meter`: e.g. `diffrax.TqdmProgressMeter()` for long runs.
     - `throw`: if True (default) raise on bad input or solver failure; if False, return a
       per-trajectory `result` code instead (use this under `jax.vmap`).
-    - `max_impacts`: scenes with a floor only: the static bound on the number of impacts
-      (the size of `Trajectory.impacts`); reaching it gives `RESULTS.max_impacts_reached`.
-    - `rest_speed`: scenes with a floor only: outgoing normal speed (m/s) below which the
-      remaining bounces are merged into resting contact (see `jaxrb/_impacts.py`).
+    - `max_impacts`, `rest_speed`: scenes with a floor only: shortcuts for the options of the
+      same names in `contact` (the bound on the number of impacts, default 64; the speed below
+      which a bounce series is replaced by its limit, default 1e-2 m/s).
+    - `contact`: scenes with a floor only: a `jaxrb.contact.ContactOptions` (bounds and
+      tolerances of the contact engine; docs/contact.md).
 
     **Returns:** a `Trajectory` with full `State`s at `ts`.
 
@@ -160,7 +101,7 @@ def simulate(
         raise TypeError(f"state0 must be a jaxrb.State, got {type(state0).__name__}")
     for name, n in (("pos", 3), ("quat", 4), ("vel", 3), ("omega", 3)):
         as_float_array(getattr(state0, name), f"state0.{name}", (n,))
-    _check_concrete_inputs(state0, ts)
+    check_concrete_inputs(state0, ts)
     if solver is None:
         solver = dfx.Tsit5()
     if stepsize_controller is None:
@@ -171,21 +112,22 @@ def simulate(
     if adjoint is None:
         adjoint = dfx.RecursiveCheckpointAdjoint()
     if scene.floor is not None:
-        from ._impacts import simulate_with_impacts
-
-        return simulate_with_impacts(
+        if contact is None:
+            shortcuts = dict(max_impacts=max_impacts, rest_speed=rest_speed)
+            contact = ContactOptions(**{k: v for k, v in shortcuts.items() if v is not None})
+        elif max_impacts is not None or rest_speed is not None:
+            raise ValueError("give max_impacts and rest_speed inside `contact`, not beside it")
+        return simulate_contact(
             scene,
             state0,
             ts,
             solver=solver,
             stepsize_controller=stepsize_controller,
             adjoint=adjoint,
-            atol=atol,
             dt0=dt0,
             max_steps=max_steps,
             throw=throw,
-            max_impacts=max_impacts,
-            rest_speed=rest_speed,
+            options=contact,
         )
     if progress_meter is None:
         progress_meter = dfx.NoProgressMeter()

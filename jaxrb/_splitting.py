@@ -31,10 +31,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._dynamics import total_wrench
+from ._inputs import check_concrete_inputs, input_result
 from ._joints import Pivot
 from ._quaternion import quat_multiply, quat_normalize
-from ._simulate import Trajectory, _check_concrete_inputs, input_result
 from ._state import State
+from ._trajectory import Trajectory
 
 
 def _axis_rotation(Pi, q, k, tau, inertia):
@@ -105,7 +106,7 @@ def simulate_splitting(scene, state0: State, ts, *, dt: float) -> Trajectory:
     dtype = jnp.result_type(state0.omega)
     ts = jnp.asarray(ts, dtype)
     state0 = jax.tree.map(lambda x: jnp.asarray(x, dtype), state0)
-    _check_concrete_inputs(state0, ts)
+    check_concrete_inputs(state0, ts)
     return _run(scene, state0, ts, inertia.astype(dtype), n_sub)
 
 

@@ -1,8 +1,8 @@
 """Inertia tensors (kg m^2), about the mass centre in body axes unless stated.
 
-Convention (SPEC.md section 1): J = integral of (r.r 1 - r r^T) dm, so the products of inertia
-J_ij = integral of x_i x_j dm (i != j) enter with a minus sign off the diagonal:
-J = [[Jxx, -Jxy, -Jxz], [-Jxy, Jyy, -Jyz], [-Jxz, -Jyz, Jzz]].
+Convention (docs/theory.md, section 3.1): J = integral of (r.r 1 - r r^T) dm, so the
+products of inertia J_ij = integral of x_i x_j dm (i != j) enter with a minus sign off the
+diagonal: J = [[Jxx, -Jxy, -Jxz], [-Jxy, Jyy, -Jyz], [-Jxz, -Jyz, Jzz]].
 
 Every function broadcasts over leading batch axes (a mass of shape (...) with a tensor of shape
 (..., 3, 3)) and is jit/vmap/grad safe. Validity checks: `inertia_violations` (traceable flags),
@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import as_float_array, is_concrete
+from ._linalg import symmetric_eigenvalues3
 from ._typing import Array, ArrayLike, Float, Mat3
 
 __all__ = [
@@ -67,7 +68,7 @@ def cuboid(mass: ArrayLike, width: ArrayLike, height: ArrayLike, depth: ArrayLik
     """Solid homogeneous cuboid about its mass centre, edges along the body axes.
 
     J = m/12 diag(b^2 + c^2, a^2 + c^2, a^2 + b^2) with a = width along body x, b = height
-    along body y, c = depth along body z (THEORY.md, "Newton–Euler equations").
+    along body y, c = depth along body z (docs/theory.md, section 3.2).
 
     **Arguments:**
 
@@ -199,7 +200,8 @@ def rotate(J: ArrayLike, R: ArrayLike) -> Mat3:
 
     If R maps components in J's axes to components in the new axes (e.g. R = R(q), body ->
     world, r_world = R r_body), the result is the same tensor in the new axes (for R = R(q),
-    the world-frame tensor I_w = R J R^T of THEORY.md). Use R^T for the opposite direction.
+    the world-frame tensor I_w = R J R^T of docs/theory.md, section 3.3). Use R^T for the
+    opposite direction.
 
     **Arguments:**
 
@@ -249,7 +251,7 @@ class InertiaViolations(NamedTuple):
     non_finite: Array
 
 
-def _analyse(J: Array, rtol: float):
+def _analyse(J: Array, rtol: float, eigenvalues=symmetric_eigenvalues3):
     """Flags plus the numbers the error messages quote."""
     non_finite = ~jnp.all(jnp.isfinite(J), axis=(-2, -1))
     eye = jnp.eye(3, dtype=J.dtype)
@@ -258,7 +260,7 @@ def _analyse(J: Array, rtol: float):
     scale = jnp.max(jnp.abs(Jf), axis=(-2, -1))
     asym = jnp.max(jnp.abs(Jf - JT), axis=(-2, -1))
     not_symmetric = asym > rtol * scale
-    moments = jnp.linalg.eigvalsh(0.5 * (Jf + JT))
+    moments = eigenvalues(0.5 * (Jf + JT))
     trace = jnp.sum(moments, axis=-1)
     i1, i2, i3 = moments[..., 0], moments[..., 1], moments[..., 2]
     not_pd = i1 <= rtol * jnp.abs(trace)
@@ -321,7 +323,7 @@ def check_inertia(J: ArrayLike, name: str = "inertia", rtol: float = 1e-9) -> Ma
     J = as_float_array(J, name, (3, 3))
     if not is_concrete(J):
         return J
-    flags, asym, scale, moments = jax.tree.map(np.asarray, _analyse(J, rtol))
+    flags, asym, scale, moments = jax.tree.map(np.asarray, _analyse(J, rtol, np.linalg.eigvalsh))
 
     def where(flag) -> tuple[tuple[int, ...], str]:
         idx = tuple(int(i) for i in np.argwhere(flag)[0]) if flag.ndim else ()

@@ -28,7 +28,7 @@ NB01 = [
         "md",
         """# 01 — The fixed-axis pendulum: bearing force, exact vs simulated
 
-The classical sample problem (THEORY.md): a body of mass m = 7.5 kg turns about a fixed horizontal
+The classical sample problem (docs/theory.md, section 6): a body of mass m = 7.5 kg turns about a fixed horizontal
 axis through O; its mass centre C is r = 0.25 m from O and its radius of gyration about the axis
 is k_O = 0.295 m. It is released from rest with OC horizontal (theta = 0, theta measured downward).
 
@@ -268,7 +268,7 @@ NB03 = [
         """# 03 — Orientation: the 12 Euler sequences, gimbal lock, and why the state is a quaternion
 
 A sequence "abc" (1, 2, 3 = body axes xi, eta, zeta) with angles (phi1, phi2, phi3) means three
-successive rotations about the body-embedded (moving) axes (THEORY.md, "Orientation"):
+successive rotations about the body-embedded (moving) axes (docs/theory.md, section 2 "Orientation"):
 
 R = R_a(phi1) R_b(phi2) R_c(phi3),  r_world = R r_body,
 
@@ -520,22 +520,35 @@ assert err < 1e-10""",
 NB04 = [
     (
         "md",
-        """# 04 — A die and a coin: air resistance, bounces, and the face they settle on
+        """# 04 — A die and a coin: air resistance, bounces, rolling, rocking, and the face they settle on
 
 The default scene of `jaxrb run` (`jaxrb/scenes/default.toml`): a 16 mm plastic die thrown with
 spin onto a table. In flight it obeys the Newton–Euler equations with gravity, quadratic air drag
 F = -k |v| v (k = rho C_D A / 2) and an aerodynamic damping moment M = -(c_1 + c_2 |w|) w (body
-frame). At the table (THEORY.md, "Impact with a floor"):
+frame). At the table the contact engine `jaxrb.contact` takes over (formulation: docs/contact.md):
 
-- each impact is located as an event and resolved by Newton's restitution (normal contact
-  velocity u_n' = -e u_n) with Coulomb friction (|j_t| <= mu j_n) at the contact point;
-- corners touching together (a die landing flat) get sequential impulses, each dissipative;
-- once a bounce leaves slower than `rest_speed` (1 cm/s) the remaining bounce series is merged
-  into resting contact: the die lies on a face and slides to a stop under friction.
+- **impacts**: when a corner (or a rim point, or a sphere) reaches the floor, the impulses at
+  *all* touching points are found together, by Newton's restitution (a point that approached
+  leaves at e times its approach speed) with Coulomb friction (|j_t| <= mu j_n);
+- **persistent contact**: between impacts the body may stay on the floor on one point (a
+  corner, a rim point), a pair of points (an edge, a coin's side line) or a face, and each
+  contact sticks (rolling, rocking, pivoting) or slides under Coulomb friction; the
+  constrained Newton–Euler equations of that *mode* are integrated;
+- **events**: every mode change ends a smooth segment and is located as an event: a touch, a
+  lift-off, a face tipping over an edge, friction reaching its cone (slip starts), a slip
+  passing zero (slip stops), a coin's face coming down (flat);
+- a series of ever smaller bounces or rocks whose points leave slower than `rest_speed`
+  (1 cm/s) is replaced by its limit (a *Zeno merge*, counted in `traj.contact.zeno_merges`).
 
-`traj.impacts` records each impact's `time`, `energy_lost` (J), the impact `count` and the
-`rest_time` at which the body came to rest. We look at height and energy, the energy lost at each
-impact, the face the die settles on, what air drag changes, a tossed coin, and an animation.""",
+**No rule lays a body flat.** A die comes to rest on a face only by the dynamics: it hops and
+rocks over its corners and edges, loses energy at every impact and to friction, lands on a face,
+slides and sticks. A coin, with no rolling resistance in the model, may keep rolling on its rim.
+
+`traj.impacts` records each impact's `time`, `point`, `impulse`, `energy_lost` (J) and the
+impact `count`; `traj.contact` records the contact mode at each save (`kind`: 0 flight, 1 point,
+2 pair, 3 face, named by `jaxrb.contact.KIND_NAMES`; `sliding`), and each event's time, cause and
+the mode after it. We look at height, energy and contact mode, the events, the face the die
+settles on, what air drag changes, two tossed coins, and an animation.""",
     ),
     (
         "code",
@@ -550,37 +563,86 @@ from IPython.display import Image, display
 
 import jaxrb.plotting
 from jaxrb._scene_file import default_scene_path, load_scene
+from jaxrb.contact import KIND_NAMES
+from jaxrb.contact._record import CAUSES  # what ended each segment: traj.contact.event_cause
 
 spec = load_scene(default_scene_path())
-scene, state0, ts = spec.scene, spec.state0, jnp.asarray(spec.ts)
+scene, state0 = spec.scene, spec.state0
+ts = jnp.linspace(0.0, 1.0, 301)  # the scene file saves to 0.6 s; 1 s also shows the die at rest
 OPTS = dict(rtol=spec.options["rtol"], atol=spec.options["atol"], max_steps=spec.options["max_steps"])
 print(f"{spec.title}: {spec.description}")
 print(f"mass {float(scene.body.mass) * 1e3:.1f} g, half edge {float(scene.body.shape.half_extents[0]) * 1e3:.0f} mm; "
       f"restitution {float(scene.floor.restitution)}, friction {float(scene.floor.friction)}; "
       f"k = {float(scene.forces[1].coefficient):.3e} kg/m; {ts.size} saves over {float(ts[-1])} s")
 
+
+def mode_name(kind, sliding):
+    name = KIND_NAMES[int(kind)]
+    return name if name == "flight" else f"{name}, {'sliding' if sliding else 'sticking'}"
+
+
+def event_table(log, first=15):
+    \"\"\"Print the first events of a ContactLog: time, cause, mode after (slot 0 is the start).\"\"\"
+    times = np.asarray(log.event_time)
+    used = np.flatnonzero(np.isfinite(times))
+    row = lambda i: (f"{i:4d} {times[i]:10.6f}  {CAUSES[int(log.event_cause[i])]:12} "  # noqa: E731
+                     f"{mode_name(log.event_kind[i], log.event_sliding[i])}")
+    print(f"{'#':>4} {'t (s)':>10}  {'cause':12} mode after")
+    for i in used[:first]:
+        print(row(i))
+    if used.size > first:
+        print(f"   ... {used.size - first} more; the last:")
+        print(row(used[-1]))
+
+
+def plot_mode(ax, t, log):
+    \"\"\"Contact mode at each save (step line) with the saves where the contact slides shaded.\"\"\"
+    kind, sliding = np.asarray(log.kind), np.asarray(log.sliding)
+    ax.step(t, kind, where="post", color="k", lw=1, label="contact mode")
+    ax.fill_between(t, 0, kind, where=sliding, step="post", color="C1", alpha=0.5, label="sliding")
+    ax.set_yticks(range(len(KIND_NAMES)), KIND_NAMES)
+    ax.set_ylim(-0.2, len(KIND_NAMES) - 0.5)
+
+
 t0 = time.perf_counter()
 traj = jaxrb.simulate(scene, state0, ts, **OPTS)  # compiles once for this scene structure
 print(f"simulate (compile + run): {time.perf_counter() - t0:.1f} s")
 assert traj.result == jaxrb.RESULTS.successful
-imp = traj.impacts
+imp, log = traj.impacts, traj.contact
 n = int(imp.count)
 t_imp, lost = np.asarray(imp.time[:n]), np.asarray(imp.energy_lost[:n])
-print(f"{n} impacts; at rest on the table from t = {float(imp.rest_time):.4f} s")""",
+a = jaxrb.plotting.trajectory_arrays(traj, scene)
+t, E = a["t"], a["energy"]
+
+# at rest: the first save from which the die sticks on a face and no longer moves
+kind, sliding = np.asarray(log.kind), np.asarray(log.sliding)
+still = (kind == 3) & ~sliding & (np.linalg.norm(a["vel"], axis=-1) < 1e-6) & (np.linalg.norm(a["omega"], axis=-1) < 1e-4)
+assert still[-1]
+i_rest = len(still) - int(np.argmin(still[::-1])) if not still.all() else 0  # start of the final run of still saves
+t_rest = float(t[i_rest])
+ev_t = np.asarray(log.event_time)
+last = int(np.flatnonzero(np.isfinite(ev_t))[-1])
+print(f"{n} impacts, {int(log.events)} events, {int(log.zeno_merges)} bounce/rock series merged; "
+      f"last event at t = {ev_t[last]:.4f} s ({CAUSES[int(log.event_cause[last])]} -> "
+      f"{mode_name(log.event_kind[last], log.event_sliding[last])}); at rest on a face from the save at t = {t_rest:.3f} s")
+print(f"energy guards {int(log.energy_guards)}, inconsistent modes {int(log.inconsistent)}, "
+      f"largest energy rise at an event {float(log.max_energy_rise):.1e} J, deepest penetration at an event "
+      f"{float(log.max_penetration):.1e} m, lowest corner at a save {float(a['lowest_z'].min()):.1e} m")
+assert float(log.max_energy_rise) <= 1e-9 * E[0] and float(log.max_penetration) < 1e-6""",
     ),
     (
         "md",
-        """## 1. Height and energy, impact by impact
+        """## 1. Height, energy and contact mode
 Energy E = m g z + m v^2 / 2 + w . J w / 2 can only fall: air drag and the damping moment take
 power P_air = k |v|^3 + (c_1 + c_2 |w|) |w|^2 in flight, each impact removes `energy_lost`, and
-sliding friction takes the rest once the die lies on the table. Before the first impact only air
-acts, so E(0) - E(t) must equal the integral of P_air (computed here from the saved states).""",
+Coulomb friction takes energy whenever a contact slides (a sticking contact, rolling or pivoting,
+takes none). Before the first impact only air acts, so E(0) - E(t) must equal the integral of
+P_air (computed here from the saved states). The third panel is the contact mode at each save,
+shaded where the contact slides.""",
     ),
     (
         "code",
-        """a = jaxrb.plotting.trajectory_arrays(traj, scene)
-t, E = a["t"], a["energy"]
-k = float(scene.forces[1].coefficient)
+        """k = float(scene.forces[1].coefficient)
 c1, c2 = float(scene.forces[2].linear), float(scene.forces[2].quadratic)
 
 
@@ -603,33 +665,49 @@ assert np.all(np.diff(E) <= 1e-9 * E[0])  # never gains energy
 assert abs(drop_flight / air_flight - 1) < 1e-3
 assert np.all(lost >= 0) and lost.sum() + air_total < E[0] - E[-1] + 1e-9
 
-fig, (ax1, ax2, ax3) = plt.subplots(3, 1, figsize=(9, 9))
+fig, (ax1, ax2, ax3) = plt.subplots(3, 1, figsize=(9, 9), sharex=True)
 ax1.plot(t, a["pos"][:, 2] * 1e3, label="mass centre")
 ax1.plot(t, a["lowest_z"] * 1e3, lw=1, label="lowest corner")
 ax2.plot(t, E * 1e3, "k", label="total energy E")
 ax2.plot(t, (E[0] - np.concatenate([[0.0], np.cumsum((P[1:] + P[:-1]) / 2 * np.diff(t))])) * 1e3, "C2--",
          lw=1, label="E(0) minus air losses only")
-for ax in (ax1, ax2):
+plot_mode(ax3, t, log)
+for ax, where in ((ax1, "upper right"), (ax2, "center right"), (ax3, "center right")):
     for i, ti in enumerate(t_imp):
-        ax.axvline(ti, color="C3", lw=0.6, alpha=0.6, label="impact" if i == 0 else None)
-    ax.axvline(float(imp.rest_time), color="k", ls=":", label="at rest")
-    ax.set_xlabel("t (s)")
-    ax.legend(fontsize="small", ncol=2)
+        ax.axvline(ti, color="C3", lw=0.6, alpha=0.4, label="impact" if i == 0 else None)
+    ax.axvline(t_rest, color="k", ls=":", label="at rest on a face")
+    ax.legend(fontsize="small", ncol=2, loc=where)
 ax1.set_ylabel("height z (mm)")
 ax2.set_ylabel("energy (mJ)")
-ax3.bar(np.arange(1, n + 1), lost * 1e3, color="C3")
-ax3.set_yscale("log")
-ax3.set_xlabel("impact number")
-ax3.set_ylabel("energy lost at the impact (mJ)")
+ax3.set_ylabel("contact mode")
+ax3.set_xlabel("t (s)")
 plt.tight_layout()
+plt.show()
+
+fig, ax = plt.subplots(figsize=(9, 3))
+ax.bar(np.arange(1, n + 1), lost * 1e3, color="C3")
+ax.set_yscale("log")
+ax.set_xlabel("impact number")
+ax.set_ylabel("energy lost (mJ)")
 plt.show()""",
     ),
     (
         "md",
-        """The first impact takes most of the energy; the later ones are corner hits and short hops as
-the die rocks onto a face, until the bounce series is merged into resting contact.
-
-## 2. Which face is up?
+        """The first impact takes most of the energy. The later ones are corner and edge hits as the die
+hops and rocks: between them it pivots on a corner (point) or rolls over an edge (pair), and a
+rocking series that dies out below `rest_speed` is replaced by its limit. It reaches a face
+sliding, and friction stops it. The events, each with what ended the segment before it and the
+mode after it:""",
+    ),
+    (
+        "code",
+        """event_table(log, first=15)
+causes, counts = np.unique(np.asarray(log.event_cause)[np.isfinite(ev_t)], return_counts=True)
+print("events by cause:", ", ".join(f"{CAUSES[int(c)]} {m}" for c, m in zip(causes, counts)))""",
+    ),
+    (
+        "md",
+        """## 2. Which face is up?
 Row 3 of R(q) is the world vertical in body coordinates; the body axis closest to it is the one
 pointing up. Faces are numbered so that opposite faces add up to 7: +x 1, +y 2, +z 3, -z 4,
 -y 5, -x 6.""",
@@ -650,8 +728,10 @@ half = float(scene.body.shape.half_extents[0])
 z_end, v_end = float(traj.states.pos[-1, 2]), float(jnp.linalg.norm(traj.states.vel[-1]))
 w_end = float(jnp.linalg.norm(traj.states.omega[-1]))
 print(f"the die settles with face {face} up (tilt {tilt:.1e} deg); centre at z = {z_end * 1e3:.4f} mm "
-      f"(half edge {half * 1e3:.1f} mm), |v| = {v_end:.1e} m/s, |w| = {w_end:.1e} rad/s")
+      f"(half edge {half * 1e3:.1f} mm), |v| = {v_end:.1e} m/s, |w| = {w_end:.1e} rad/s; "
+      f"final mode: {mode_name(log.kind[-1], log.sliding[-1])}")
 assert tilt < 0.5 and abs(z_end - half) < 1e-5 and v_end < 1e-3 and w_end < 1e-2
+assert int(log.kind[-1]) == 3 and not bool(log.sliding[-1])
 fig = jaxrb.plotting.plot_height_attitude(traj, scene, title="die: height and attitude")
 plt.show()""",
     ),
@@ -700,18 +780,30 @@ plt.show()""",
     (
         "md",
         """Air drag on a 4.5 g die in a 0.2 s throw is a small force (k |v|^2 / (m g) is about 1 %):
-it takes under 1 % of the energy before the first impact and moves the landing point by about
-2 mm. After the first impacts the two runs drift apart (different numbers of impacts by
-t = 0.3 s): small differences in the landing attitude change which corner hits next, so the face
-a thrown die ends on is sensitive to everything, air included.
+it takes under 1 % of the energy before the first impact and moves the landing point by a few
+millimetres. After the first impacts the two runs drift apart: small differences in the landing
+attitude change which corner hits next, so the face a thrown die ends on is sensitive to
+everything, air included.
 
-## 4. A coin toss
+## 4. Two coin tosses: a face coming down, and a coin rolling on its rim
 A coin is a short cylinder, `jaxrb.Cylinder(radius, half_height)`, its axis along body z (heads
-= +z up). A 5.67 g coin of 24.26 mm diameter and 1.75 mm thickness is tossed from 10 cm with
-1.5 m/s upwards, spinning at 40 rad/s about a diameter (about two and a quarter turns in the
-air), with air drag and a small aerodynamic damping moment, onto a table with restitution 0.3
-and friction 0.3. Rolling on the rim is not modelled (see the module docstring of
-`jaxrb/_impacts.py`): this flip about a diameter lands on a face.""",
+= +z up). Its contact model (docs/contact.md) has, per cap, the lowest and the highest rim point,
+the side line, and the two caps as faces. On its rim it is in *point* mode (rolling where the
+contact sticks, sliding where it slips); its face comes down when the highest rim point reaches
+the floor (the *flat* event), and that is the only way it gets onto a face: no rule lays it flat.
+Rolling resistance is not modelled, so nothing but sliding friction and air takes energy from a
+coin rolling on its rim.
+
+A 5.67 g coin of 24.26 mm diameter and 1.75 mm thickness, with air drag and a small aerodynamic
+damping moment, lands on a table with restitution 0.3 and friction 0.3. Both tosses use the same
+compiled simulation (same scene structure, same number of saves):
+
+- **flip**: from 10 cm with 1.5 m/s upwards, spinning at 40 rad/s about a diameter;
+- **spin**: tilted by 34 deg, 1 m/s upwards, turning at 25 rad/s about a diameter and at
+  60 rad/s about its own axis.
+
+The lean angle is the angle between the coin's axis (body z) and the vertical, folded into
+0–90 deg (0: flat on either face, 90: standing on its rim).""",
     ),
     (
         "code",
@@ -720,25 +812,80 @@ coin = jaxrb.RigidBody(MASS, shape=jaxrb.Cylinder(RADIUS, HALF))
 coin_air = jaxrb.QuadraticDrag.from_air(rho=1.225, drag_coefficient=1.1, area=np.pi * RADIUS**2)
 coin_scene = jaxrb.Scene(coin, forces=(jaxrb.Gravity(), coin_air, jaxrb.DampingMoment(quadratic=1e-9)),
                          floor=jaxrb.Floor(0.3, friction=0.3))
-tilt0 = jaxrb.axis_angle_to_quat(jnp.array([1.0, 0.0, 0.0]), jnp.asarray(0.02))  # nearly flat
-coin0 = jaxrb.make_state(pos=(0.0, 0.0, 0.1), quat=tilt0, vel=(0.0, 0.0, 1.5), omega=(40.0, 0.0, 0.0))
-t0 = time.perf_counter()
-ctraj = jaxrb.simulate(coin_scene, coin0, jnp.linspace(0.0, 0.8, 161), rtol=1e-6, atol=1e-6)
-print(f"simulate (compile + run): {time.perf_counter() - t0:.1f} s")
-assert ctraj.result == jaxrb.RESULTS.successful
-cimp = ctraj.impacts
-up = float(jaxrb.quat_to_matrix(ctraj.states.quat[-1])[2, 2])  # body z . world z
-side = "heads" if up > 0 else "tails"
-print(f"{int(cimp.count)} impacts, first at t = {float(cimp.time[0]):.3f} s; at rest from t = {float(cimp.rest_time):.3f} s; "
-      f"lands {side} up; centre at z = {float(ctraj.states.pos[-1, 2]) * 1e3:.4f} mm")
-print("energy lost per impact (mJ):", np.round(np.asarray(cimp.energy_lost[: int(cimp.count)]) * 1e3, 4))
-assert abs(abs(up) - 1) < 1e-6 and abs(float(ctraj.states.pos[-1, 2]) - HALF) < 1e-6
-fig = jaxrb.plotting.plot_height_attitude(ctraj, coin_scene, title=f"coin toss: lands {side} up")
-plt.show()""",
+x_axis = jnp.array([1.0, 0.0, 0.0])
+tosses = {
+    "flip": jaxrb.make_state(pos=(0.0, 0.0, 0.1), quat=jaxrb.axis_angle_to_quat(x_axis, jnp.asarray(0.02)),
+                             vel=(0.0, 0.0, 1.5), omega=(40.0, 0.0, 0.0)),
+    "spin": jaxrb.make_state(pos=(0.0, 0.0, 0.1), quat=jaxrb.axis_angle_to_quat(x_axis, jnp.asarray(0.6)),
+                             vel=(0.2, 0.0, 1.0), omega=(25.0, 0.0, 60.0)),
+}
+cts = jnp.linspace(0.0, 1.5, 301)
+coins = {}
+for name, s0 in tosses.items():
+    t0 = time.perf_counter()
+    ctraj = jaxrb.simulate(coin_scene, s0, cts, rtol=1e-6, atol=1e-6)
+    assert ctraj.result == jaxrb.RESULTS.successful
+    R = jax.vmap(jaxrb.quat_to_matrix)(ctraj.states.quat)
+    lean = np.degrees(np.arccos(np.clip(np.abs(np.asarray(R[:, 2, 2])), 0.0, 1.0)))
+    ca = jaxrb.plotting.trajectory_arrays(ctraj, coin_scene)
+    coins[name] = (ctraj, lean, ca)
+    clog = ctraj.contact
+    c_t = np.asarray(clog.event_time)
+    c_used = np.isfinite(c_t)
+    causes, counts = np.unique(np.asarray(clog.event_cause)[c_used], return_counts=True)
+    side = "heads" if float(R[-1, 2, 2]) > 0 else "tails"
+    print(f"{name}: simulate {time.perf_counter() - t0:.1f} s (the first run compiles); {int(ctraj.impacts.count)} impacts, "
+          f"first at t = {float(ctraj.impacts.time[0]):.3f} s; {int(clog.events)} events "
+          f"({', '.join(f'{CAUSES[int(c)]} {m}' for c, m in zip(causes, counts))})")
+    print(f"      at t = {float(cts[-1])} s: {mode_name(clog.kind[-1], clog.sliding[-1])}, lean {lean[-1]:.1f} deg, "
+          f"{side} up, centre at z = {float(ctraj.states.pos[-1, 2]) * 1e3:.4f} mm, "
+          f"|v| = {float(jnp.linalg.norm(ctraj.states.vel[-1])):.1e} m/s, E = {ca['energy'][-1] * 1e3:.4f} mJ "
+          f"(from {ca['energy'][0] * 1e3:.4f} mJ)")
+    assert np.all(np.diff(ca["energy"]) <= 1e-9 * ca["energy"][0])  # never gains energy
+
+flip, flip_lean, _ = coins["flip"]
+flat = np.flatnonzero(np.asarray(flip.contact.event_cause) == CAUSES.index("flat"))
+print(f"flip: the face came down (flat event) at t = {float(flip.contact.event_time[flat[0]]):.4f} s")
+assert flat.size >= 1 and int(flip.contact.kind[-1]) == 3 and flip_lean[-1] < 1e-4
+assert abs(float(flip.states.pos[-1, 2]) - HALF) < 1e-6
+spin, spin_lean, _ = coins["spin"]
+assert int(spin.contact.kind[-1]) == 1 and spin_lean[-1] > 1.0  # still on its rim at the end""",
+    ),
+    (
+        "code",
+        """fig, axes = plt.subplots(3, 2, figsize=(13, 8), sharex=True)
+for col, (name, (ctraj, lean, ca)) in enumerate(coins.items()):
+    ax1, ax2, ax3 = axes[:, col]
+    ax1.plot(ca["t"], ca["pos"][:, 2] * 1e3, label="centre")
+    ax1.plot(ca["t"], ca["lowest_z"] * 1e3, lw=1, label="lowest rim point")
+    ax1.set_ylabel("height (mm)")
+    ax1.set_title(f"coin toss: {name}")
+    ax2.plot(ca["t"], lean, "C2")
+    ax2.set_ylabel("lean: axis to vertical (deg)")
+    ax2.set_yticks([0, 30, 60, 90])
+    plot_mode(ax3, ca["t"], ctraj.contact)
+    ax3.set_ylabel("contact mode")
+    ax3.set_xlabel("t (s)")
+    for ax in (ax1, ax2, ax3):
+        for i, ti in enumerate(np.asarray(ctraj.impacts.time[: int(ctraj.impacts.count)])):
+            ax.axvline(ti, color="C3", lw=0.6, alpha=0.4, label="impact" if i == 0 else None)
+    ax1.legend(fontsize="small")
+    ax3.legend(fontsize="small", loc="upper left")
+plt.tight_layout()
+plt.show()
+print("spin toss, events:")
+event_table(spin.contact, first=12)""",
     ),
     (
         "md",
-        """## 5. The animation
+        """The flipped coin bounces, rocks for a moment on its rim, and its face slaps down: a flat
+event, then it slides on its face until friction stops it. The spinning coin bounces a few
+times and then stays on its rim: it rolls, slips and wobbles (the lean angle swings while the
+contact point runs round the rim), losing energy only to sliding friction and air. It is still
+on its rim when the run ends; a real coin would come down sooner, by rolling resistance and air
+flow under it (Euler's disk), which the model does not have.
+
+## 5. The animation
 `jaxrb.plotting.animate` draws the body at R(q) x + pos for each frame (world frame, z up) and
 saves a GIF; here into a temporary directory, shown inline.""",
     ),
@@ -759,7 +906,7 @@ NB05 = [
         """# 05 — Identifying a full inertia tensor from gyro data
 
 A body tumbles freely; a gyro records its body-frame angular velocity omega(t) with noise. Euler's
-equations with products of inertia (THEORY.md),
+equations with products of inertia (docs/theory.md, section 4.2),
 
 J w_dot + w x (J w) = M_C = 0,  J = [[J11, -J12, -J13], [-J12, J22, -J23], [-J13, -J23, J33]],
 
@@ -903,7 +1050,7 @@ NB06 = [
         """# 06 — Fitting restitution and air drag
 
 **Restitution (Newton's hypothesis).** At an impact the normal velocity of the contact point
-reverses and shrinks: v' = -e v, 0 <= e <= 1. A ball dropped from rest at height h0 (THEORY.md):
+reverses and shrinks: v' = -e v, 0 <= e <= 1. A ball dropped from rest at height h0 (docs/theory.md, section 8.2):
 
 - first impact t_1 = sqrt(2 h0 / g), then t_(k+1) - t_k = 2 e^k sqrt(2 g h0) / g;
 - apex after bounce k: e^(2k) h0; all bounces end at the Zeno time t_1 (1 + e) / (1 - e).
@@ -978,11 +1125,14 @@ plt.show()""",
     (
         "md",
         """## 3. A simulated ball on a `jaxrb.Floor` against the exact bounce
-`jaxrb.simulate` locates each impact as an event and applies the restitution map; its height must
-follow `jaxrb.analytic.ball_height`, and its impact times fed to `fit_restitution` must give e back.
+`jaxrb.simulate` locates each impact as an event and applies Newton's restitution at the touching
+point (the contact engine `jaxrb.contact`, docs/contact.md); its height must follow
+`jaxrb.analytic.ball_height`, and its impact times fed to `fit_restitution` must give e back.
 Once a bounce leaves the floor slower than `rest_speed` (default 1 cm/s) the remaining infinite
-series of micro-bounces is merged into rest (recorded `rest_time` = the Zeno time); from then on
-the height may differ from the exact one by at most rest_speed^2 / (2 g) = 5 um.""",
+series of micro-bounces is replaced by its limit, a *Zeno merge* (`traj.contact.zeno_merges`):
+the ball then stays on the floor in persistent contact, and `traj.impacts.rest_time` records the
+time the series would have ended (for a point on a flat floor, exactly the Zeno time). From then
+on the height may differ from the exact one by at most rest_speed^2 / (2 g) = 5 um.""",
     ),
     (
         "code",
@@ -1001,6 +1151,8 @@ bound = 0.01**2 / (2 * G)  # rest_speed = 1 cm/s: the merged micro-bounces are l
 print(f"{n_imp} impacts recorded; first 6 impact times off by {t_err:.1e} s")
 print(f"max |z_sim - z_exact| up to the last impact {err_bounces:.1e} m, overall {float(dz.max()):.1e} m (bound {bound:.1e} m)")
 print(f"rest time: simulated {float(traj.impacts.rest_time):.6f} s, exact {float(ball_rest_time(H0_TRUE, E_TRUE)):.6f} s")
+print(f"bounce series merged: {int(traj.contact.zeno_merges)}; contact mode at the end: "
+      f"{jaxrb.contact.KIND_NAMES[int(traj.contact.kind[-1])]}")
 assert t_err < 1e-9 and err_bounces < 1e-8 and float(dz.max()) <= bound
 assert abs(float(traj.impacts.rest_time) - float(ball_rest_time(H0_TRUE, E_TRUE))) < 1e-8
 e_sim = jaxrb.fit.fit_restitution(impact_times=sim_times[:6], restitution0=0.5).values["restitution"]
@@ -1082,7 +1234,7 @@ machine runs the notebook (often a shared CPU). The real numbers, with compile t
 larger batches, float32, more methods and peers (MuJoCo), come from `benchmarks/`
 (`python -m benchmarks.b1_torque_free --n 1000 --dtype both --out bench_out`).
 
-Problem B1 (SPEC section 4): a torque-free asymmetric body, I = (1, 2, 3), omega0 = (a, 0, c) with
+Problem B1 (benchmarks/README.md): a torque-free asymmetric body, I = (1, 2, 3), omega0 = (a, 0, c) with
 a ~ U(0.5, 1.5), c ~ U(1, 2), q0 = identity, T = 20 s. Error = worst body's
 max(|omega(T) - omega_exact(T)| / |omega0|, geodesic angle of q(T) vs a reference), with the exact
 elliptic-function omega (`jaxrb.analytic.asymmetric_top`) and a tolerance-1e-13 float64 reference

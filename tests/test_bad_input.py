@@ -1,4 +1,4 @@
-"""Bad input ends in a clear error or a per-member flag, never a silent NaN (SPEC section 3)."""
+"""Bad input ends in a clear error or a per-member flag, never a silent NaN."""
 
 import diffrax as dfx
 import equinox as eqx

@@ -218,7 +218,7 @@ def test_identity_and_ranges(seq):
 
 @pytest.mark.parametrize("seq", ["121", "313", "321", "132"])
 def test_elementary_definition(seq):
-    """R = R_a(phi1) R_b(phi2) R_c(phi3) with THEORY.md's elementary matrices, written out."""
+    """R = R_a(phi1) R_b(phi2) R_c(phi3), elementary matrices of docs/theory.md, section 2.1."""
 
     def elem(axis, t):
         c, s = math.cos(t), math.sin(t)

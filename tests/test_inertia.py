@@ -41,7 +41,8 @@ def test_cuboid_quadrature():
     nodes, w = _grid(_gauss(4, -a / 2, a / 2), _gauss(4, -b / 2, b / 2), _gauss(4, -c / 2, c / 2))
     J = _tensor_of_points(nodes, w * m / (a * b * c))
     np.testing.assert_allclose(inertia.cuboid(m, a, b, c), J, rtol=EXACT, atol=EXACT)
-    # THEORY.md: m/12 diag(b^2 + c^2, a^2 + c^2, a^2 + b^2), width a along x, height b along y.
+    # docs/theory.md, section 3.2: m/12 diag(b^2 + c^2, a^2 + c^2, a^2 + b^2), width a along x,
+    # height b along y.
     np.testing.assert_allclose(
         np.diag(inertia.cuboid(m, a, b, c)),
         m / 12 * np.array([b**2 + c**2, a**2 + c**2, a**2 + b**2]),

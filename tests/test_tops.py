@@ -217,7 +217,8 @@ def test_symmetric_top_vs_integration(J1, J3, omega0, q0):
     np.testing.assert_allclose(
         jnp.linalg.norm(sol.angular_momentum, axis=-1), sol.angular_momentum_norm, rtol=1e-14
     )
-    # THEORY.md angles: gamma, alpha from arccos; sin(beta) = (J3 - J1) w3 w_tau / (|K| |w|)
+    # docs/theory.md, section 5.2: gamma, alpha from arccos;
+    # sin(beta) = (J3 - J1) w3 w_tau / (|K| |w|)
     w_tau = float(jnp.linalg.norm(w0[:2]))
     Kn = float(sol.angular_momentum_norm[0])
     wn = float(sol.omega_norm[0])

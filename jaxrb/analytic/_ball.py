@@ -1,7 +1,7 @@
 """A ball dropped (or thrown straight up) onto a floor with coefficient of restitution e.
 
 No spin, no drag: the ball's lowest point moves on parabolas under gravity g and Newton's
-impact law v' = -e v at the floor (THEORY.md, "Impact with a floor"). Heights (m) are of the
+impact law v' = -e v at the floor (docs/theory.md, section 8). Heights (m) are of the
 lowest point above the floor, times in s, velocities in m/s (positive up). All functions are
 jittable and differentiable with respect to h0, restitution, v0 and g; every argument
 broadcasts over leading batch axes.

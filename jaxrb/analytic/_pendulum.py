@@ -1,4 +1,4 @@
-"""The fixed-axis pendulum sample problem (THEORY.md, "The sample problem"): exact motion and
+"""The fixed-axis pendulum sample problem (docs/theory.md, section 6): exact motion and
 bearing force.
 
 A rigid body turns about a fixed horizontal axis through O; its mass centre C is at distance
@@ -42,7 +42,8 @@ class PendulumParams:
 
 
 SAMPLE_PENDULUM = PendulumParams(mass=7.5, r=0.25, k_O=0.295)
-"""The sample problem of THEORY.md: m = 7.5 kg, r = 0.25 m, k_O = 0.295 m, g = 9.81 m/s^2."""
+"""The sample problem of docs/theory.md, section 6: m = 7.5 kg, r = 0.25 m, k_O = 0.295 m,
+g = 9.81 m/s^2."""
 
 
 def pendulum_angular_acceleration(

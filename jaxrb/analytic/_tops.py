@@ -1,4 +1,4 @@
-"""Exact torque-free motion of spherical, symmetric and asymmetric tops (THEORY.md).
+"""Exact torque-free motion of spherical, symmetric and asymmetric tops (docs/theory.md, section 5).
 
 Body-frame angular velocity omega; quaternions scalar first (e0, e1, e2, e3) mapping body to
 world. Euler's equations J omega_dot = -omega x J omega, q_dot = 1/2 q (x) (0, omega).
@@ -95,7 +95,7 @@ def symmetric_top(
 ) -> SymmetricTopSolution:
     """Torque-free symmetric top with principal moments (J1, J1, J3) about body axes (1, 2, 3).
 
-    With lambda = (J1 - J3) w3_0 / J1 (THEORY.md 2.14-2.21):
+    With lambda = (J1 - J3) w3_0 / J1 (docs/theory.md, section 5.2):
     w1 = w1_0 cos(lambda t) + w2_0 sin(lambda t), w2 = w2_0 cos(lambda t) - w1_0 sin(lambda t),
     w3 = w3_0, i.e. omega(t) = R_3(-lambda t) omega0 in body axes. The attitude is
 

@@ -1,0 +1,304 @@
+"""`simulate` for a scene with a floor: smooth segments in fixed contact modes joined by the
+maps at events (docs/contact.md).
+
+Each segment is one `diffrax.diffeqsolve` of the mode's right-hand side that stops at the
+first zero of the mode's event function (root found on the dense output). The segment loop is
+an `equinox.internal.while_loop` bounded by `max_events`: it stops once every member of a
+batch has reached the end time, reverse-differentiates (checkpointed) and, with
+`diffrax.ForwardMode`, forward-differentiates. Gradients include the shift of each event time.
+"""
+
+import diffrax as dfx
+import equinox as eqx
+import equinox.internal as eqxi
+import jax
+import jax.numpy as jnp
+
+from .._checks import is_concrete
+from .._inputs import input_result
+from .._quaternion import quat_normalize
+from .._results import RESULTS
+from .._state import State
+from .._trajectory import Trajectory
+from ._events import (
+    TimeBisection,
+    cause_of,
+    condition_tolerances,
+    conditions,
+    start_offsets,
+)
+from ._features import contact_model
+from ._modes import FLIGHT, PAIR, flight_mode, mode_rates, solve_mode, unit_state
+from ._options import ContactOptions
+from ._record import ContactLog, add_impact, empty_impacts
+from ._step_limit import gap_step_limit, limited
+from ._transition import at_event
+
+
+class _Segment(eqx.Module):
+    """The arguments of a segment's right-hand side and event function."""
+
+    mode: object
+    offsets: jax.Array
+
+
+def _sliding(mode):
+    held_still = mode.stick[0] & ((mode.kind != PAIR) | mode.stick[1])
+    return (mode.kind != FLIGHT) & ~held_still
+
+
+def simulate_contact(
+    scene, state0, ts, *, solver, stepsize_controller, adjoint, dt0, max_steps, throw, options
+) -> Trajectory:
+    """`jaxrb.simulate` for a scene with a floor (it resolves the solver, controller and
+    adjoint defaults). `options` is a `ContactOptions`."""
+    if scene.body.shape is None:
+        raise ValueError(
+            "a scene with a floor needs a body shape (Sphere, Box or Cylinder) for contact"
+        )
+    model = contact_model(scene.body.shape)  # raises for a shape with no contact model
+    del model
+    if not isinstance(options, ContactOptions):
+        raise TypeError(f"options must be a ContactOptions, got {type(options).__name__}")
+    ts = jnp.asarray(ts)
+    state0 = jax.tree.map(lambda x: jnp.asarray(x, ts.dtype), state0)
+    tol = options.resolved(ts.dtype)
+    if all(is_concrete(x) for x in (*jax.tree.leaves(state0), *jax.tree.leaves(scene))):
+        d0 = float(
+            scene.body.shape.floor_distance(
+                state0.pos, quat_normalize(state0.quat), scene.floor.height
+            )
+        )
+        if d0 < -tol.contact:
+            raise ValueError(
+                f"the body starts below the floor: its lowest point is {-d0:.3g} m under the "
+                "floor plane"
+            )
+    kind = "lax" if isinstance(adjoint, dfx.ForwardMode) else "checkpointed"
+    return _simulate_contact(
+        scene,
+        state0,
+        ts,
+        solver,
+        stepsize_controller,
+        adjoint,
+        dt0,
+        max_steps,
+        throw,
+        options,
+        tol,
+        kind,
+    )
+
+
+@eqx.filter_jit
+def _simulate_contact(
+    scene,
+    state0,
+    ts,
+    solver,
+    stepsize_controller,
+    adjoint,
+    dt0,
+    max_steps,
+    throw,
+    options,
+    tol,
+    loop_kind,
+):
+    dtype = ts.dtype
+    model = contact_model(scene.body.shape)
+    t_end = ts[-1]
+    T = ts.shape[0]
+    y0 = unit_state(state0)
+    result = input_result(scene, state0, ts)
+    d0 = scene.body.shape.floor_distance(y0.pos, y0.quat, scene.floor.height)
+    result = RESULTS.where(
+        (result == RESULTS.successful) & (d0 < -tol.contact), RESULTS.starts_below_floor, result
+    )
+    cond_tol = condition_tolerances(model, tol, dtype)
+
+    def values(t, y, mode):
+        sol = solve_mode(t, unit_state(y), mode, scene, model, tol)
+        return conditions(sol, mode, model, scene, tol)
+
+    term = dfx.ODETerm(lambda t, y, args: mode_rates(t, y, args.mode, scene, model, tol))
+    event = dfx.Event(
+        # in JAX's default float dtype: diffrax compares it with a Python float internally
+        lambda t, y, args, **kw: jnp.min(values(t, y, args.mode) + args.offsets).astype(
+            jnp.result_type(float)
+        ),
+        root_finder=TimeBisection(
+            rtol=tol.event, atol=tol.event, flip="detect", expand_if_necessary=True
+        ),
+        direction=False,
+    )
+    controller = limited(
+        stepsize_controller,
+        lambda t, y, args: gap_step_limit(t, y, args.mode, args.offsets, scene, model, tol),
+    )
+    log0 = dict(
+        events=jnp.array(0, jnp.int32),
+        zeno_merges=jnp.array(0, jnp.int32),
+        energy_guards=jnp.array(0, jnp.int32),
+        inconsistent=jnp.array(0, jnp.int32),
+        max_energy_rise=jnp.zeros((), dtype),
+        max_penetration=jnp.zeros((), dtype),
+        event_time=jnp.full(options.max_events + 1, jnp.inf, dtype),
+        event_cause=jnp.zeros(options.max_events + 1, jnp.int32),
+        event_kind=jnp.zeros(options.max_events + 1, jnp.int32),
+        event_sliding=jnp.zeros(options.max_events + 1, bool),
+    )
+    # each pass of the loop: the maps of the event that ended the previous segment (at the
+    # first pass, of the start: a body may start touching the floor), then one segment
+    carry0 = dict(
+        t=ts[0],
+        y=y0,
+        mode=flight_mode(dtype),
+        trigger=jnp.array(-1),
+        done=result != RESULTS.successful,
+        impacts=empty_impacts(options.max_impacts, dtype),
+        log=log0,
+        buffer=jax.tree.map(lambda x: jnp.zeros((T,) + x.shape, dtype), y0),
+        kind=jnp.zeros(T, jnp.int32),
+        sliding=jnp.zeros(T, bool),
+        filled=jnp.zeros(T, bool),
+        result=result,
+        num_steps=jnp.array(0),
+    )
+
+    def segment(carry):
+        done = carry["done"]
+        t0 = jnp.where(done, t_end, carry["t"])
+        out = at_event(t0, carry["y"], carry["mode"], carry["trigger"], scene, model, tol)
+        impacts = carry["impacts"]
+        too_many = ~done & out.impact & (impacts.count >= options.max_impacts)
+        do = ~done & ~too_many
+        impacts = add_impact(
+            impacts,
+            do & out.impact,
+            t0,
+            out.point,
+            out.impulse,
+            out.speed,
+            out.energy_lost,
+            out.rest_time,
+        )
+        log = carry["log"]
+        count = lambda flag: (do & flag).astype(jnp.int32)  # noqa: E731
+        log = dict(
+            events=log["events"],
+            zeno_merges=log["zeno_merges"] + count(out.merged),
+            energy_guards=log["energy_guards"] + count(out.guarded),
+            inconsistent=log["inconsistent"] + count(out.inconsistent),
+            max_energy_rise=jnp.maximum(
+                log["max_energy_rise"], jnp.where(do, out.energy_rise, 0.0)
+            ),
+            max_penetration=jnp.maximum(
+                log["max_penetration"], jnp.where(do, out.penetration, 0.0)
+            ),
+        )
+        slot = jnp.minimum(log["events"], options.max_events)
+
+        def put(name, value):
+            buf = carry["log"][name]
+            log[name] = buf.at[slot].set(jnp.where(do, value, buf[slot]))
+
+        put("event_time", t0)
+        put("event_cause", cause_of(carry["trigger"], model))
+        put("event_kind", out.mode.kind)
+        put("event_sliding", _sliding(out.mode))
+        mode = jax.tree.map(lambda a, b: jnp.where(do, a, b), out.mode, carry["mode"])
+        y = jax.tree.map(lambda a, b: jnp.where(do, a, b), out.state, carry["y"])
+        offsets = start_offsets(values(t0, y, mode), cond_tol)
+        done = done | too_many
+        t0 = jnp.where(done, t_end, t0)
+        sol = dfx.diffeqsolve(
+            term,
+            solver,
+            t0=t0,
+            t1=t_end,
+            dt0=dt0,
+            y0=y,
+            args=_Segment(mode, offsets),
+            saveat=dfx.SaveAt(
+                subs=[dfx.SubSaveAt(ts=jnp.clip(ts, t0, t_end)), dfx.SubSaveAt(t1=True)]
+            ),
+            stepsize_controller=controller,
+            adjoint=adjoint,
+            max_steps=max_steps,
+            event=event,
+            throw=False,
+        )
+        t_stop = sol.ts[1][0]
+        y_stop = jax.tree.map(lambda x: x[0], sol.ys[1])
+        ev = jnp.asarray(sol.event_mask) & ~done
+        res = RESULTS.promote(sol.result)
+        failed = ~done & (res != RESULTS.successful) & (res != RESULTS.event_occurred)
+        filled = carry["filled"]
+        owned = ~filled & ~done & (ts >= t0) & ((ts < t_stop) | (~ev & (ts <= t_stop)))
+
+        def keep(buf, new):
+            return jnp.where(owned.reshape((T,) + (1,) * (buf.ndim - 1)), new, buf)
+
+        trigger = jnp.argmin(values(t_stop, y_stop, mode) + offsets)
+        log["events"] = log["events"] + ev.astype(jnp.int32)
+        result = carry["result"]
+        result = RESULTS.where(failed & (result == RESULTS.successful), res, result)
+        result = RESULTS.where(
+            too_many & (result == RESULTS.successful), RESULTS.max_impacts_reached, result
+        )
+        moved = ~done & ~failed
+        return dict(
+            t=jnp.where(moved, t_stop, carry["t"]),
+            y=jax.tree.map(lambda a, b: jnp.where(moved, a, b), y_stop, y),
+            mode=mode,
+            trigger=jnp.where(ev, trigger, carry["trigger"]),
+            done=done | ~ev | failed,
+            impacts=impacts,
+            log=log,
+            buffer=jax.tree.map(keep, carry["buffer"], sol.ys[0]),
+            kind=jnp.where(owned, mode.kind, carry["kind"]),
+            sliding=jnp.where(owned, _sliding(mode), carry["sliding"]),
+            filled=filled | owned,
+            result=result,
+            num_steps=carry["num_steps"] + jnp.where(done, 0, sol.stats["num_accepted_steps"]),
+        )
+
+    carry = eqxi.while_loop(
+        lambda c: ~jnp.all(c["done"]),
+        segment,
+        carry0,
+        max_steps=options.max_events + 1,  # the start, then one pass per event
+        kind=loop_kind,
+    )
+    result = carry["result"]
+    result = RESULTS.where(
+        ~carry["done"] & (result == RESULTS.successful), RESULTS.max_events_reached, result
+    )
+    filled = carry["filled"]
+    last = carry["y"]
+    raw = jax.tree.map(
+        lambda b, end: jnp.where(filled.reshape((T,) + (1,) * (b.ndim - 1)), b, end[None]),
+        carry["buffer"],
+        last,
+    )
+    drift = jnp.max(jnp.where(filled, jnp.abs(jnp.linalg.norm(raw.quat, axis=-1) - 1), 0.0))
+    states = State(raw.pos, quat_normalize(raw.quat), raw.vel, raw.omega)
+    log = ContactLog(
+        kind=jnp.where(filled, carry["kind"], carry["mode"].kind),
+        sliding=jnp.where(filled, carry["sliding"], _sliding(carry["mode"])),
+        **carry["log"],
+    )
+    traj = Trajectory(
+        ts=ts,
+        states=states,
+        result=result,
+        quat_norm_drift=drift,
+        num_steps=carry["num_steps"],
+        impacts=carry["impacts"],
+        contact=log,
+    )
+    if throw:
+        traj = result.error_if(traj, result != RESULTS.successful)
+    return traj

@@ -1,0 +1,147 @@
+"""The conditions that end a contact segment, and the event function diffrax roots.
+
+Every mode has the same fixed list of conditions (docs/contact.md, section 4), unused ones
+set to a large value; the event is the first zero of their minimum:
+
+- entries 0..P-1: the gaps (m) of the contact points the mode does not hold (a cap's highest
+  rim point: its gap less the flatness tolerance);
+- then, per unit mass (m/s^2): the normal force at point a (or the face's), at point b, the
+  friction margin at a (mu N - |f_t|; a face: its limit surface), at b, the margin of a
+  sticking pair's force along its line; for a sliding point a (or face), b (m/s): its slip
+  speed less half the stop speed `slip_stop`, or, for a slide that started from rest, its slip
+  along the direction it started in plus half the blend speed (they fire when the slip has
+  stopped or turned back; a slip that only turns, as a coin's on its rim, does not end a
+  segment); and a face's centre-of-pressure
+  margin (m/s^2: N/m times the distance inside its support region over its friction
+  radius).
+
+Every condition must start positive: diffrax fires on a downward crossing only, so one that
+started at or below zero would disarm the whole event (impacts included). A condition that
+starts at its boundary (within its tolerance) is therefore shifted, and fires only when it is
+violated by more than the tolerance.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from .._quaternion import _safe_norm
+from ._modes import FACE, PAIR, POINT, Solution, active_points
+
+NORMAL_A, NORMAL_B, CONE_A, CONE_B, AXIAL, SLIP_A, SLIP_B, COP = range(8)
+NUM_FORCE_CONDITIONS = 8
+UNUSED = 1e30
+
+
+def _sqrt_pos(x):
+    positive = x > 0
+    return jnp.where(positive, jnp.sqrt(jnp.where(positive, x, 1.0)), 0.0)
+
+
+def force_margins(lam, rows, mode, model, geom, mu) -> jax.Array:
+    """The 8 force conditions of `mode` (module docstring) from its multipliers per unit
+    mass `lam` (6,) (forces: m/s^2; impulses: m/s), with the slip entries left unused."""
+    dtype = lam.dtype
+    big = jnp.asarray(UNUSED, dtype)
+    kind, stick_a, stick_b = mode.kind, mode.stick[0], mode.stick[1]
+    is_pair, is_face = kind == PAIR, kind == FACE
+    holds = (kind == POINT) | is_pair | is_face
+    both = is_pair & stick_a & stick_b
+    cone_point = mu * lam[0] - _safe_norm(lam[2:4])
+    cone_face = mu * lam[0] - _safe_norm(jnp.stack([lam[3], lam[4], lam[5] / rows.rho]))
+    cone_a = jnp.where(
+        is_face, cone_face, jnp.where(both, mu * lam[0] - jnp.abs(lam[2]), cone_point)
+    )
+    cone_b = jnp.where(both, mu * lam[1] - jnp.abs(lam[4]), mu * lam[1] - _safe_norm(lam[4:6]))
+    axial = (
+        _sqrt_pos((mu * lam[0]) ** 2 - lam[2] ** 2)
+        + _sqrt_pos((mu * lam[1]) ** 2 - lam[4] ** 2)
+        - jnp.abs(lam[3])
+    )
+    couple_body = geom.R.T @ (lam[1] * geom.t1 + lam[2] * geom.t2)
+    cop = model.cop_margin(mode.face, lam[0], couple_body) / rows.rho
+    return jnp.stack(
+        [
+            jnp.where(holds, lam[0], big),
+            jnp.where(is_pair, lam[1], big),
+            jnp.where(holds & stick_a, cone_a, big),
+            jnp.where(is_pair & stick_b, cone_b, big),
+            jnp.where(both, axial, big),
+            big,
+            big,
+            jnp.where(is_face, cop, big),
+        ]
+    )
+
+
+def conditions(sol: Solution, mode, model, scene, tol) -> jax.Array:
+    """The condition vector (P + 8,) of `mode` at the solution's state."""
+    dtype = sol.acc.dtype
+    big = jnp.asarray(UNUSED, dtype)
+    rows, geom = sol.rows, sol.geom
+    threshold = jnp.where(jnp.asarray(model.flat_points), tol.flat, 0.0).astype(dtype)
+    gaps = jnp.where(active_points(model, mode), big, geom.gap - threshold)
+    force = force_margins(sol.lam / scene.body.mass, rows, mode, model, geom, scene.floor.friction)
+    kind = mode.kind
+    holds = (kind == POINT) | (kind == PAIR) | (kind == FACE)
+    # a slide ends when its slip has stopped: one that started from rest when its slip,
+    # along the direction it started in, has passed zero (by half the blend speed, where
+    # friction still opposes that direction); any other when its speed has fallen to the
+    # stop speed (a slip that only turns, as a coin's on its rim, does not end it)
+    on_face = kind == FACE
+    slip_a = jnp.where(on_face, rows.twist, geom.slip[mode.a])
+    dir_a = jnp.where(on_face, mode.twist_dir, mode.slide_dir[0])
+    slip_b, dir_b = geom.slip[mode.b], mode.slide_dir[1]
+
+    def slip_condition(slip, direction, from_rest):
+        turned = slip @ direction + 0.5 * tol.slip_blend
+        # half the stop speed: at the event the slip is within the stop speed, where the
+        # next mode may stick, whatever the root finder's resolution
+        return jnp.where(from_rest, turned, _safe_norm(slip) - 0.5 * tol.slip_stop)
+
+    end_a = slip_condition(slip_a, dir_a, mode.from_rest[0])
+    end_b = slip_condition(slip_b, dir_b, mode.from_rest[1])
+    force = force.at[SLIP_A].set(jnp.where(holds & ~mode.stick[0], end_a, big))
+    force = force.at[SLIP_B].set(jnp.where((kind == PAIR) & ~mode.stick[1], end_b, big))
+    return jnp.concatenate([gaps, force])
+
+
+def cause_of(trigger, model) -> jax.Array:
+    """The `ContactLog.CAUSES` code of condition index `trigger` (-1: the start)."""
+    P = model.num_points
+    k = trigger - P
+    flat = jnp.asarray(model.flat_points)[jnp.clip(trigger, 0, P - 1)]
+    return jnp.select(
+        [trigger < 0, (trigger < P) & ~flat, trigger < P, k <= NORMAL_B, k <= AXIAL, k <= SLIP_B],
+        [0, 1, 2, 3, 4, 5],
+        6,
+    )
+
+
+def condition_tolerances(model, tol, dtype) -> jax.Array:
+    """Per-condition tolerance (P + 8,): penetration for gaps, force_tol for the force
+    conditions, a quarter of the blend speed for the slips."""
+    P = model.num_points
+    slip = 0.25 * tol.slip_blend
+    force = np.array([tol.force] * 5 + [slip, slip] + [tol.force])
+    return jnp.asarray(np.concatenate([np.full(P, tol.penetration), force]), dtype)
+
+
+def start_offsets(values0, tolerances) -> jax.Array:
+    """Shifts making each condition start positive when it starts at its boundary: a
+    condition at c0 <= tol fires once it has fallen tol below min(c0, 0)."""
+    near = values0 <= tolerances
+    shift = tolerances + jnp.maximum(-values0, 0.0)
+    return jnp.where(near & (tolerances > 0), shift, 0.0)
+
+
+class TimeBisection(optx.Bisection):
+    """Bisection on the event time that stops when the bracket is below the time
+    tolerance. (optimistix's also waits for |value| < atol, which a condition measured in
+    m/s^2 with a steep slope may never reach at the resolution of the time.)"""
+
+    def terminate(self, fn, y, args, options, state, tags):
+        del fn, args, options, tags
+        scale = self.atol + self.rtol * jnp.abs(y)
+        return jnp.abs(state.lower - state.upper) < scale, optx.RESULTS.successful

@@ -1,0 +1,258 @@
+"""Impacts: Newton's restitution with Coulomb friction at all touching points at once
+(docs/contact.md, section 5).
+
+Unknowns: the impulse Lambda_i = (Lambda_n, Lambda_t) at each touching point i (N s, in the
+floor's frame n, t1, t2). With the Delassus operator W = J M^-1 J^T and the contact
+velocities before, c = J u-, the velocities after are c+ = c + W Lambda, and per point:
+
+- Newton: Lambda_n >= 0, c+_n - target >= 0, complementary, with target = -e min(c_n, 0)
+  (a point that approached leaves at e times its approach speed unless the others lift it; a
+  resting one does not approach);
+- Coulomb on the impulses: |Lambda_t| <= mu Lambda_n; sticking (c+_t = 0) or sliding with
+  Lambda_t = -mu Lambda_n s, s the unit slip after the impact (maximum dissipation).
+
+The touching points are gathered into `SLOTS` (4) slots: all touching points of a convex
+body lie on one face (a box's corners; a flat cap is held by four of its rim points). The
+problem is solved by projected Gauss-Seidel (`SWEEPS` sweeps; an isotropic step in the
+tangent plane, so that at the fixed point a sliding impulse opposes the slip exactly), then
+*polished*: the pattern it identifies (which points push, which stick, the sliding
+directions) is solved exactly (a minimum-norm solve of its equalities, as the four corners of
+a face are redundant) and kept if it satisfies every condition. Where the pattern is not
+unique (a face sliding on four corners: the normal impulses split in many ways) the polish
+may fail and the Gauss-Seidel solution, which satisfies the conditions to its convergence,
+is kept.
+
+Four variants are solved together: Newton-Coulomb; the frictionless impulse, used where the
+first would add energy (Newton's law with friction can, in rare configurations); the
+frictionless plastic impulse (e = 0), used where even the frictionless one would add energy
+(with several points and e near 1 it can: a point that was separating is held at zero
+normal speed, not let approach); and the limit of a bounce series: the smallest change of
+the velocities (in the kinetic metric) that stops the normal motion of every touching
+point, i.e. a frictionless plastic impulse holding them all (normal impulses of either
+sign); the slip it leaves is then taken up by Coulomb friction in the contact mode that
+follows.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._linalg import inverse3, solve as small_solve
+from .._quaternion import _safe_norm
+from .._state import State
+from ._modes import cross
+
+SLOTS = 4
+SWEEPS = 60
+VARIANTS = 4  # Newton-Coulomb, frictionless, held (bounce-series limit), plastic
+
+
+class ImpactOutcome(eqx.Module):
+    """The state after an impact and what the floor did: the total impulse (N s, world), the
+    world point on the floor where it acts (m), whether every condition holds."""
+
+    state: State
+    impulse: jax.Array
+    point: jax.Array
+    consistent: jax.Array
+
+
+def _jacobians(body, R, r, n, t1, t2):
+    """Per-point contact Jacobians J (S, 3, 6) (rows n, t1, t2), M^-1 J^T rows, and W."""
+    inv_iw = R @ inverse3(body.inertia_matrix) @ R.T
+    frame = jnp.stack([n, t1, t2])
+    lin = jnp.broadcast_to(frame, r.shape[:1] + (3, 3))
+    ang = cross(r[:, None, :], frame[None, :, :])  # r x d
+    J = jnp.concatenate([lin, ang], axis=-1)
+    minv = jnp.concatenate([lin / body.mass, ang @ inv_iw.T], axis=-1)
+    W = jnp.einsum("iad,jbd->iajb", J, minv)
+    return J, minv, W
+
+
+def _gauss_seidel(W, c, target, present, mu, bilateral, lam0, sweeps):
+    """Projected Gauss-Seidel for the impulses (S, 3) (normal, t1, t2) per slot, from lam0."""
+    S = c.shape[0]
+    tiny = jnp.finfo(c.dtype).tiny
+    diag = jnp.einsum("iaia->ia", W)
+    wn = jnp.maximum(diag[:, 0], tiny)
+    # an isotropic tangential step: the largest eigenvalue of each slot's 2 x 2 block
+    a, d, b = diag[:, 1], diag[:, 2], W[jnp.arange(S), 1, jnp.arange(S), 2]
+    wt = jnp.maximum(0.5 * (a + d) + _safe_norm(jnp.stack([0.5 * (a - d), b], -1)), tiny)
+
+    def sweep(_, lam):
+        for i in range(S):  # unrolled: a few slots
+            v = c[i] + jnp.einsum("ajb,jb->a", W[i], lam)
+            ln = lam[i, 0] - (v[0] - target[i]) / wn[i]
+            ln = jnp.where(bilateral, ln, jnp.maximum(ln, 0.0))
+            ln = jnp.where(present[i], ln, 0.0)
+            vt = v[1:] + W[i, 1:, i, 0] * (ln - lam[i, 0])
+            trial = lam[i, 1:] - vt / wt[i]
+            size = _safe_norm(trial)
+            bound = mu * jnp.abs(ln)
+            shrink = jnp.where(size > bound, bound / jnp.where(size > 0, size, 1.0), 1.0)
+            lt = jnp.where(present[i], trial * shrink, 0.0)
+            lam = jnp.where((jnp.arange(S) == i)[:, None], jnp.concatenate([ln[None], lt]), lam)
+        return lam
+
+    return jax.lax.fori_loop(0, sweeps, sweep, lam0)
+
+
+POLISH_ITERATIONS = 3
+
+
+def _polish(W, c, target, present, mu, bilateral, lam, margin):
+    """The exact solution of the pattern of `lam`: which slots push (Lambda_n > 0, or all
+    present ones when bilateral), which stick (inside the cone by more than the relative
+    `margin`), and along which directions the others slide (those opposing their friction;
+    then, while it helps, those of the slip after the polished impulse)."""
+    S = c.shape[0]
+    dtype = c.dtype
+    tiny = jnp.finfo(dtype).tiny
+    scale = jnp.max(jnp.abs(lam[:, 0])) + tiny
+    push = present & (bilateral | (lam[:, 0] > 1e-9 * scale))
+    lt = _safe_norm(lam[:, 1:])
+    stick = push & (lt < mu * jnp.abs(lam[:, 0]) * (1 - margin))
+    slide = push & ~stick
+    rows = jnp.stack([push, stick, stick], 1).reshape(-1)
+    unknown = jnp.stack([push, push, push], 1).reshape(-1)
+    rhs = (jnp.stack([target, jnp.zeros(S, dtype), jnp.zeros(S, dtype)], 1) - c).reshape(-1)
+    eye = jnp.eye(3, dtype=dtype)
+    first = jnp.array([1.0, 0.0, 0.0], dtype)
+    # the Gauss-Seidel unknowns z = (Lambda_n, Lambda_t1, Lambda_t2); a sliding slot's
+    # tangential impulse rides on its normal one
+    z0 = jnp.where(slide[:, None], lam * first, lam).reshape(-1)
+
+    def solve(hats):
+        ride = eye * first + jnp.concatenate(
+            [jnp.zeros((S, 1, 3), dtype), -mu * hats[:, :, None] * first], axis=1
+        )
+        B = jnp.where(slide[:, None, None], ride, eye)
+        A = jnp.einsum("iajb,jbc->iajc", W, B).reshape(3 * S, 3 * S)
+        A = jnp.where(rows[:, None] & rows[None, :], A, 0.0)
+        # the smallest change of z that satisfies the equalities exactly: unique where they
+        # determine the impulses; where they do not (a face's four corners) it keeps the
+        # Gauss-Seidel split of the normal impulses
+        G = A @ A.T
+        size = jnp.max(jnp.abs(jnp.diagonal(G))) + tiny
+        G = jnp.where(rows[:, None] & rows[None, :], G, jnp.eye(3 * S, dtype=dtype))
+        G = G + 1e-13 * size * jnp.eye(3 * S, dtype=dtype)
+        z = z0 + A.T @ jnp.where(rows, small_solve(G, jnp.where(rows, rhs - A @ z0, 0.0)), 0.0)
+        return jnp.einsum("iab,ib->ia", B, jnp.where(unknown, z, 0.0).reshape(S, 3))
+
+    hats = -lam[:, 1:] / jnp.where(lt > 0, lt, 1.0)[:, None]  # the slip after, as friction says
+    speed = jnp.max(jnp.abs(c)) + tiny
+    best = solve(hats)
+    best_error = _violation(W, c, target, present, mu, bilateral, best)
+    for _ in range(POLISH_ITERATIONS):  # follow the slip after; keep the best iterate
+        v = c + jnp.einsum("iajb,jb->ia", W, best)
+        vt = _safe_norm(v[:, 1:])
+        slips = vt > 1e-6 * speed  # a slip of roundoff size tells no direction
+        hats = jnp.where(slips[:, None], v[:, 1:] / jnp.where(slips, vt, 1.0)[:, None], hats)
+        trial = solve(hats)
+        error = _violation(W, c, target, present, mu, bilateral, trial)
+        better = error < best_error
+        best = jnp.where(better, trial, best)
+        best_error = jnp.where(better, error, best_error)
+    return best
+
+
+def _violation(W, c, target, present, mu, bilateral, lam):
+    """The largest violation (m/s) of the conditions by the impulses `lam`."""
+    v = c + jnp.einsum("iajb,jb->ia", W, lam)
+    per_mass = jnp.maximum(jnp.max(jnp.abs(lam[:, 0])), jnp.finfo(c.dtype).tiny)
+    speed = jnp.max(jnp.abs(c)) + jnp.finfo(c.dtype).tiny
+    to_speed = speed / per_mass  # impulses measured on the scale of the speeds
+    ln = lam[:, 0]
+    lt = _safe_norm(lam[:, 1:])
+    vt = _safe_norm(v[:, 1:])
+    gap = v[:, 0] - target
+    bad = jnp.stack(
+        [
+            jnp.where(bilateral, 0.0, -ln * to_speed),  # pushes only
+            jnp.where(bilateral, jnp.abs(gap), -gap),  # no approach (held: none at all)
+            jnp.where(bilateral, 0.0, jnp.minimum(ln * to_speed, jnp.abs(gap))),  # complementary
+            (lt - mu * jnp.abs(ln)) * to_speed,  # inside the cone
+            # stick (no slip after), or slide on the cone's edge, opposing the slip (a point
+            # without impulse has no friction to satisfy)
+            jnp.minimum(
+                vt,
+                jnp.maximum(
+                    (mu * jnp.abs(ln) - lt) * to_speed,
+                    jnp.where(
+                        lt > 0,
+                        jnp.sum(lam[:, 1:] * v[:, 1:], -1) / jnp.where(lt > 0, lt, 1.0) + vt,
+                        0.0,
+                    ),
+                ),
+            ),
+        ]
+    )
+    return jnp.max(jnp.where(present[None, :], bad, 0.0))
+
+
+def solve_impacts(state, geom, points, touching, scene, tol):
+    """The impact at `state` (unit quaternion) at the contact `points` (Q, 3) (world offsets
+    from the mass centre) of which `touching` (Q,) touch the floor, three ways: Newton-Coulomb,
+    frictionless, the limit of a bounce series (frictionless, holding every touching point),
+    and frictionless plastic. Returns an `ImpactOutcome` with a leading axis of `VARIANTS`."""
+    body = scene.body
+    floor = scene.floor
+    e, mu = floor.restitution, floor.friction
+    dtype = state.pos.dtype
+    n, t1, t2, R = geom.n, geom.t1, geom.t2, geom.R
+    # the touching points, gathered into the first slots in an order set by where they are
+    # (along a fixed direction of the floor), not by how the shape numbers them: where the
+    # impulses are not unique (a face on four corners, with friction) the solution the
+    # sweeps settle on depends on the slots' order, and so the outcome would
+    where = points @ (t1 + 0.6180339887498949 * t2)
+    order = jnp.argsort(jnp.where(touching, where, jnp.inf))[:SLOTS]
+    present = touching[order]
+    r = points[order]
+    J, minv, W = _jacobians(body, R, r, n, t1, t2)
+    u = jnp.concatenate([state.vel, geom.w])
+    c = jnp.where(present[:, None], J @ u, 0.0)  # (S, 3)
+
+    def variant(e, mu, bilateral):
+        target = jnp.where(present, -e * jnp.minimum(c[:, 0], 0.0), 0.0)
+        lam = _gauss_seidel(W, c, target, present, mu, bilateral, jnp.zeros_like(c), SWEEPS)
+        # derivatives flow through the polish's exact solve, not through the sweeps
+        lam = jax.lax.stop_gradient(lam)
+        # polished three ways: a slot that Gauss-Seidel leaves near its cone's edge may stick
+        # (on the edge) or slide; the best (or Gauss-Seidel's own solution) is kept
+        tries = [lam] + [
+            _polish(W, c, target, present, mu, bilateral, lam, margin)
+            for margin in (1e-9, 1e-2, -1e-2)
+        ]
+        errors = jnp.stack([_violation(W, c, target, present, mu, bilateral, x) for x in tries])
+        # prefer an exact (polished) solution on ties: derivatives flow through it only
+        best = jnp.argmin(errors.at[0].set(2.0 * errors[0] + tol.velocity))
+        lam = jnp.stack(tries)[best]
+        speed = jnp.max(jnp.abs(c))
+        return (
+            u + jnp.einsum("ia,iad->d", lam, minv),
+            jnp.einsum("ia,iad->d", lam, J),
+            errors[best] <= 1e-5 * speed + tol.velocity,
+        )
+
+    zero = jnp.zeros_like(e)
+    u_after, generalised, consistent = jax.vmap(variant)(
+        jnp.stack([e, e, zero, zero]),
+        jnp.stack([mu, zero, zero, zero]),
+        jnp.array([False, False, True, False]),
+    )
+    states = State(
+        jnp.broadcast_to(state.pos, (VARIANTS, 3)),
+        jnp.broadcast_to(state.quat, (VARIANTS, 4)),
+        u_after[:, :3],
+        u_after[:, 3:] @ R,  # body frame: R^T w for each variant
+    )
+    impulse, moment = generalised[:, :3], generalised[:, 3:]
+    # where the impulse acts: the point of its line of action on the floor plane
+    jn = impulse @ n
+    tiny = jnp.finfo(dtype).tiny
+    arm = cross(impulse, moment) / jnp.maximum(jnp.sum(impulse**2, -1), tiny)[:, None]
+    lowest = r[0]
+    pushes = jn > 0
+    along = ((lowest - arm) @ n) / jnp.where(pushes, jn, 1.0)
+    arm = jnp.where(pushes[:, None], arm + impulse * along[:, None], lowest)
+    return ImpactOutcome(states, impulse, state.pos + arm, consistent)

@@ -1,0 +1,471 @@
+"""Contact modes, their constraint rows, and the constrained Newton-Euler equations.
+
+A mode fixes, for a smooth segment, which feature carries the body (nothing, a point, a pair
+of points, a face) and whether each of its contacts sticks or slides. With the mode fixed the
+contact forces solve one linear system of at most 6 rows (docs/contact.md, section 2):
+
+    (J M^-1 C) lambda = -(J a0 + b) - stabilisation,      u' = a0 + M^-1 C lambda,
+
+with u = (v, w) (mass-centre velocity and angular velocity, both world frame),
+M = diag(m 1, I_w), a0 the accelerations from the forces alone, J the constraint rows, b their
+velocity-product terms and C the force columns (equal to J except where a sliding contact's
+friction rides on its normal force). Rows a mode does not use are identity rows with zero
+right-hand side, so every mode is the same fixed-size solve.
+
+Row slots: points and pairs use 0: normal at a, 1: normal at b, 2-3: tangential at a,
+4-5: tangential at b (a pair's tangential rows run across and along its line; a sticking pair
+has only one row along the line, slot 3, since both ends move along it together); a face uses
+0: normal at its centre, 1-2: tilt about t1, t2, 3-4: tangential at its centre, 5: spin.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._dynamics import accelerations
+from .._linalg import inverse3, solve as small_solve
+from .._quaternion import _safe_norm, quat_normalize, quat_to_matrix
+from .._rates import quat_rate
+from .._state import State
+
+FLIGHT, POINT, PAIR, FACE = 0, 1, 2, 3
+KIND_NAMES = ("flight", "point", "pair", "face")
+NUM_ROWS = 6
+
+
+class Mode(eqx.Module):
+    """A contact mode (traced: every member of a batch has its own).
+
+    **Fields:**
+
+    - `kind`: FLIGHT, POINT, PAIR or FACE (int).
+    - `a`, `b`: contact point indices (POINT uses `a`; PAIR both).
+    - `face`: face index (FACE).
+    - `stick`: (2,) bool, whether point a / point b sticks (a face uses entry 0).
+    - `slide_dir`: (2, 3) world unit directions of the slip of points a, b, used while a
+      sliding point's slip is zero (sliding from rest); zero means no friction at that instant.
+    - `twist_dir`: (3,) the same for a sliding face's slip twist (v . t1, v . t2, rho w . n).
+    - `from_rest`: (2,) bool, whether the slide of point a (or the face) / point b started
+      from zero slip (its end is then detected as the slip turning back, not stopping).
+    - `seed`: (3,) body-frame direction used for a rim point when its cap lies flat.
+    """
+
+    kind: jax.Array
+    a: jax.Array
+    b: jax.Array
+    face: jax.Array
+    stick: jax.Array
+    slide_dir: jax.Array
+    twist_dir: jax.Array
+    from_rest: jax.Array
+    seed: jax.Array
+
+
+def flight_mode(dtype) -> Mode:
+    zero = jnp.array(0, jnp.int32)
+    return Mode(
+        kind=jnp.array(FLIGHT, jnp.int32),
+        a=zero,
+        b=zero,
+        face=zero,
+        stick=jnp.zeros(2, bool),
+        slide_dir=jnp.zeros((2, 3), dtype),
+        twist_dir=jnp.zeros(3, dtype),
+        from_rest=jnp.zeros(2, bool),
+        seed=jnp.array([1.0, 0.0, 0.0], dtype),
+    )
+
+
+class CandidateTable:
+    """Every mode a shape can be in, in order of preference (more contact first, stick
+    before slide), as static numpy arrays (C,): kind, a, b, face, stick (C, 2), and the masks
+    (C, P) of the points each one holds on the floor (`active`) and holds still (`sticking`).
+
+    `candidates`: the indices of the modes that can apply when the body touches the floor
+    with some of its points. All touching points of a convex body lie in one supporting
+    plane, i.e. on one face (or on an edge or corner of it), so for a body with faces whose
+    points are all corners (a box) only that face's modes need testing: `group(touching)`
+    gives those indices; otherwise every mode is a candidate.
+    """
+
+    def __init__(self, model):
+        P = model.num_points
+        rows = []  # (kind, a, b, face, stick_a, stick_b, active points, sticking points)
+        for f, pts in enumerate(model.face_points):
+            for stick in (True, False):
+                rows.append((FACE, pts[0], pts[0], f, stick, False, pts, pts if stick else ()))
+        for a, b in model.pairs:
+            for sa, sb in ((True, True), (True, False), (False, True), (False, False)):
+                held = tuple(p for p, s in ((a, sa), (b, sb)) if s)
+                rows.append((PAIR, a, b, 0, sa, sb, (a, b), held))
+        for a in model.point_features:
+            for stick in (True, False):
+                rows.append((POINT, a, a, 0, stick, False, (a,), (a,) if stick else ()))
+        rows.append((FLIGHT, 0, 0, 0, False, False, (), ()))
+
+        def mask(points):
+            m = np.zeros(P, bool)
+            m[list(points)] = True
+            return m
+
+        self.kind = np.array([r[0] for r in rows], np.int32)
+        self.a = np.array([r[1] for r in rows], np.int32)
+        self.b = np.array([r[2] for r in rows], np.int32)
+        self.face = np.array([r[3] for r in rows], np.int32)
+        self.stick = np.array([(r[4], r[5]) for r in rows], bool)
+        self.active = np.stack([mask(r[6]) for r in rows])
+        self.sticking = np.stack([mask(r[7]) for r in rows])
+        faces = face_point_masks(model)[: model.num_faces]
+        on_a_face = [np.any(np.all(~a | faces, axis=1)) for a in self.active]
+        if model.num_faces and all(on_a_face):
+            # per face: the modes whose points all lie on it (FLIGHT among them)
+            self.groups = np.stack(
+                [np.flatnonzero(np.all(~self.active | f, axis=1)) for f in faces]
+            )
+            self.group_faces = faces
+        else:
+            self.groups = np.arange(len(rows))[None, :]
+            self.group_faces = np.ones((1, P), bool)
+
+    def __len__(self):
+        return len(self.kind)
+
+    def candidates(self, touching) -> jax.Array:
+        """Indices (traced, fixed length) of the modes to test when the points `touching`
+        (P,) touch the floor: the group of the face holding most of them."""
+        if len(self.groups) == 1:
+            return jnp.asarray(self.groups[0])
+        count = jnp.sum(jnp.asarray(self.group_faces) & touching, axis=1)
+        return jnp.asarray(self.groups)[jnp.argmax(count)]
+
+    def mode(self, i, like: Mode) -> Mode:
+        """Candidate `i` (a traced index) as a `Mode`, its seed directions taken from `like`."""
+        return Mode(
+            kind=jnp.asarray(self.kind)[i],
+            a=jnp.asarray(self.a)[i],
+            b=jnp.asarray(self.b)[i],
+            face=jnp.asarray(self.face)[i],
+            stick=jnp.asarray(self.stick)[i],
+            slide_dir=like.slide_dir,
+            twist_dir=like.twist_dir,
+            from_rest=like.from_rest,
+            seed=like.seed,
+        )
+
+
+def face_point_masks(model) -> np.ndarray:
+    """(max(F, 1), P) mask of each face's points."""
+    faces = np.zeros((max(model.num_faces, 1), model.num_points), bool)
+    for f, pts in enumerate(model.face_points):
+        faces[f, list(pts)] = True
+    return faces
+
+
+def active_points(model, mode: Mode) -> jax.Array:
+    """Mask (P,) of the points the mode holds on the floor."""
+    idx = jnp.arange(model.num_points, dtype=jnp.int32)
+    on_pair = (idx == mode.a) | ((idx == mode.b) & (mode.kind == PAIR))
+    on_face = jnp.asarray(face_point_masks(model))[mode.face]
+    kind = mode.kind
+    return jnp.where(kind == FACE, on_face, jnp.where(kind == FLIGHT, False, on_pair))
+
+
+class Geometry(eqx.Module):
+    """The contact kinematics of a state, world frame: the floor's normal n and tangents
+    t1, t2; the rotation R and angular velocity w; the contact points' offsets r (P, 3) from
+    the mass centre, their rates r' (P, 3), gaps g (P,), gap rates g' (P,) and slips (P, 3)."""
+
+    n: jax.Array
+    t1: jax.Array
+    t2: jax.Array
+    R: jax.Array
+    w: jax.Array
+    r: jax.Array
+    r_dot: jax.Array
+    gap: jax.Array
+    gap_rate: jax.Array
+    slip: jax.Array
+
+    def tangential(self, x):
+        return x - (x @ self.n)[..., None] * self.n
+
+
+def floor_frame(floor, dtype):
+    """Unit normal n and tangent basis (t1, t2) of the floor (world), t1 x t2 = n."""
+    eye = jnp.eye(3, dtype=dtype)
+    return eye[2], eye[0], eye[1]
+
+
+def geometry(state: State, scene, model, seed) -> Geometry:
+    """Contact kinematics at `state` (unit quaternion).
+
+    A contact point p(d) may depend on the floor's normal in the body frame, d = R^T n (a
+    support point); then its offset r = R p(d) moves at r' = w x r + R p'(d)[d x omega_body]
+    (d' = d x omega_body), which is zero beyond w x r for a corner.
+    """
+    n, t1, t2 = floor_frame(scene.floor, state.pos.dtype)
+    R = quat_to_matrix(state.quat)
+    down = R.T @ n
+    if model.moving_points:
+        p, p_dot = jax.jvp(lambda d: model.points(d, seed), (down,), (cross(down, state.omega),))
+    else:
+        p = model.points(down, seed)
+        p_dot = jnp.zeros_like(p)
+    w = R @ state.omega
+    r = p @ R.T
+    r_dot = cross(w, r) + p_dot @ R.T
+    gap = (state.pos + r) @ n - scene.floor.height
+    vel = state.vel + cross(w, r)
+    gap_rate = vel @ n
+    slip = vel - gap_rate[:, None] * n
+    return Geometry(n, t1, t2, R, w, r, r_dot, gap, gap_rate, slip)
+
+
+def unit_or(x, fallback):
+    """x / |x|, or `fallback` where |x| is (numerically) zero; gradient safe."""
+    n = _safe_norm(x, keepdims=True)
+    tiny = n <= 1e3 * jnp.finfo(x.dtype).tiny
+    return jnp.where(tiny, fallback, x / jnp.where(tiny, 1.0, n))
+
+
+def cross(a, b):
+    """a x b over the last axis (plain jnp ops: small and quick to compile)."""
+    a1, a2, a3 = a[..., 0], a[..., 1], a[..., 2]
+    b1, b2, b3 = b[..., 0], b[..., 1], b[..., 2]
+    return jnp.stack([a2 * b3 - a3 * b2, a3 * b1 - a1 * b3, a1 * b2 - a2 * b1], axis=-1)
+
+
+class Rows(eqx.Module):
+    """A mode's constraint rows at a state (6 slots, module docstring).
+
+    Each row (and each force column) is a force direction `d` at offset `r` from the mass
+    centre plus a couple `k`: it acts on u = (v, w) as (d, r x d + k).
+
+    - `J`, `C`: (6, 6) rows and force columns (world frame);
+    - `bias`: (6,) velocity-product terms: J u' + bias is the rows' acceleration;
+    - `vel`: (6,) the rows' velocities J u; `pos`: (6,) position residuals of the holonomic
+      rows (gaps, tilts), 0 for the others;
+    - `mask`: (6,) used rows; `holonomic`: (6,) used rows that constrain positions;
+    - `rho`: the face's friction radius (m); `twist`: the face's slip twist (v.t1, v.t2, rho w.n).
+    """
+
+    J: jax.Array
+    C: jax.Array
+    bias: jax.Array
+    vel: jax.Array
+    pos: jax.Array
+    mask: jax.Array
+    holonomic: jax.Array
+    rho: jax.Array
+    twist: jax.Array
+
+
+def face_twist(state, geom, model, face):
+    """The slip twist (v_c . t1, v_c . t2, rho w . n) of face `face`'s centre, and rho."""
+    _, centres, rhos = model.face_frame()
+    if not model.num_faces:
+        return jnp.zeros(3, state.pos.dtype), jnp.ones((), state.pos.dtype)
+    rc = geom.R @ centres[face]
+    vc = state.vel + cross(geom.w, rc)
+    rho = rhos[face]
+    return jnp.stack([vc @ geom.t1, vc @ geom.t2, rho * (geom.w @ geom.n)]), rho
+
+
+def _with_face_rows(state, geom, mode, hat_f, mu, scene, model, point_rows):
+    """The rows of a face mode (normal at the face's centre, tilts about t1 and t2,
+    tangential at the centre, spin), or `point_rows` for the other kinds."""
+    p_d, p_r, p_rdot, p_dC, p_mask, p_pos = point_rows
+    dtype = state.pos.dtype
+    n, t1, t2, R, w = geom.n, geom.t1, geom.t2, geom.R, geom.w
+    is_face, stick = mode.kind == FACE, mode.stick[0]
+    zero, zero3 = jnp.zeros((), dtype), jnp.zeros(3, dtype)
+    normals, centres, _ = model.face_frame()
+    twist, rho = face_twist(state, geom, model, mode.face)
+    nu_w = R @ normals[mode.face]
+    rc = R @ centres[mode.face]
+    f_d = jnp.stack([n, zero3, zero3, t1, t2, zero3])
+    f_k = jnp.stack([zero3, t1, t2, zero3, zero3, n])
+    centre_gap = (state.pos + rc) @ n - scene.floor.height
+    # d/dt (nu_w . t2) = w . t1 and d/dt (-nu_w . t1) = w . t2 near nu_w = -n
+    f_pos = jnp.stack([centre_gap, nu_w @ t2, -(nu_w @ t1), zero, zero, zero])
+    slide_force = n - mu * (hat_f[0] * t1 + hat_f[1] * t2)
+    f_dC = jnp.concatenate([jnp.where(stick, n, slide_force)[None], f_d[1:]])
+    f_kC = jnp.concatenate([jnp.where(stick, zero3, -mu * rho * hat_f[2] * n)[None], f_k[1:]])
+    f_mask = jnp.stack([is_face] * 3 + [is_face & stick] * 3)
+    mask = jnp.where(is_face, f_mask, p_mask)
+    holonomic = mask & jnp.where(
+        is_face,
+        jnp.array([True, True, True, False, False, False]),
+        jnp.array([True, True, False, False, False, False]),
+    )
+    return (
+        jnp.where(is_face, f_d, p_d),
+        jnp.where(is_face, rc, p_r),
+        jnp.where(is_face, cross(w, rc), p_rdot),  # a face's centre is a body point
+        jnp.where(is_face, f_k, 0.0),
+        jnp.where(is_face, f_dC, p_dC),
+        jnp.where(is_face, f_kC, 0.0),
+        mask,
+        jnp.where(is_face, f_pos, p_pos),
+        holonomic,
+        twist,
+        rho,
+    )
+
+
+def mode_rows(state, geom: Geometry, mode: Mode, hats, mu, scene, model) -> Rows:
+    """The rows of `mode` at `state`; `hats` = (slip direction at a, at b, face twist
+    direction) that sliding friction (coefficient `mu`) opposes (unit, or zero)."""
+    dtype = state.pos.dtype
+    n, t1, t2, w = geom.n, geom.t1, geom.t2, geom.w
+    kind, stick_a, stick_b = mode.kind, mode.stick[0], mode.stick[1]
+    hat_a, hat_b, hat_f = hats
+    is_pair = kind == PAIR
+    point_like = (kind == POINT) | is_pair
+
+    # points and pairs: normal at a, normal at b, two tangential rows at a, two at b
+    ra, rb = geom.r[mode.a], geom.r[mode.b]
+    along = unit_or(geom.tangential(rb - ra), t1)
+    e1 = jnp.where(is_pair, cross(n, along), t1)
+    e2 = jnp.where(is_pair, along, t2)
+    p_d = jnp.stack([n, n, e1, e2, e1, e2])
+    p_r = jnp.stack([ra, rb, ra, ra, rb, rb])
+    p_rdot = jnp.stack([geom.r_dot[i] for i in (mode.a, mode.b, mode.a, mode.a, mode.b, mode.b)])
+    zero = jnp.zeros((), dtype)
+    p_pos = jnp.stack([geom.gap[mode.a], geom.gap[mode.b], zero, zero, zero, zero])
+    p_dC = jnp.concatenate(
+        [
+            jnp.where(stick_a, n, n - mu * hat_a)[None],
+            jnp.where(stick_b, n, n - mu * hat_b)[None],
+            p_d[2:],
+        ]
+    )
+    p_mask = jnp.stack(
+        [
+            point_like,
+            is_pair,
+            point_like & stick_a,
+            point_like & stick_a,
+            is_pair & stick_b,
+            is_pair & stick_b & ~stick_a,
+        ]
+    )
+
+    if not model.num_faces:  # a shape with no face (a ball): point rows only
+        k = kC = jnp.zeros((6, 3), dtype)
+        d, r, r_dot, dC, mask, pos = p_d, p_r, p_rdot, p_dC, p_mask, p_pos
+        holonomic = mask & jnp.array([True, True, False, False, False, False])
+        twist, rho = jnp.zeros(3, dtype), jnp.ones((), dtype)
+    else:
+        d, r, r_dot, k, dC, kC, mask, pos, holonomic, twist, rho = _with_face_rows(
+            state, geom, mode, hat_f, mu, scene, model, (p_d, p_r, p_rdot, p_dC, p_mask, p_pos)
+        )
+    J = jnp.concatenate([d, cross(r, d) + k], axis=1)
+    C = jnp.concatenate([dC, cross(r, dC) + kC], axis=1)
+    point_vel = state.vel + cross(w, r)
+    return Rows(
+        J=J,
+        C=C,
+        bias=jnp.sum(d * cross(w, r_dot), axis=1),
+        vel=jnp.sum(d * point_vel, axis=1) + k @ w,
+        pos=pos,
+        mask=mask,
+        holonomic=holonomic,
+        rho=rho,
+        twist=twist,
+    )
+
+
+def inverse_mass_columns(body, R, C):
+    """M^-1 C_k for each column row C_k = (force, moment), world frame: (6, 6)."""
+    inv_iw = R @ inverse3(body.inertia_matrix) @ R.T
+    return jnp.concatenate([C[:, :3] / body.mass, C[:, 3:] @ inv_iw.T], axis=1)
+
+
+def solve_rows(rows: Rows, minv_C, rhs):
+    """lambda with (J M^-1 C) lambda = rhs on the used rows (0 on the others)."""
+    dtype = rhs.dtype
+    A = rows.J @ minv_C.T
+    both = rows.mask[:, None] & rows.mask[None, :]
+    A = jnp.where(both, A, jnp.eye(NUM_ROWS, dtype=dtype))
+    lam = small_solve(A, jnp.where(rows.mask, rhs, 0.0))
+    return jnp.where(rows.mask, lam, 0.0)
+
+
+def sliding_hats(geom: Geometry, twist, mode: Mode, blend):
+    """The directions sliding friction opposes: of s + blend s0 for each slip s (points a, b;
+    the face's twist), s0 the mode's unit direction of that slip at the segment's start. Where
+    the slip is large against `blend` (m/s) this is the slip's direction; where sliding starts
+    from rest it is s0, and in between it turns smoothly."""
+    hat_a = unit_or(geom.slip[mode.a] + blend * mode.slide_dir[0], mode.slide_dir[0])
+    hat_b = unit_or(geom.slip[mode.b] + blend * mode.slide_dir[1], mode.slide_dir[1])
+    hat_f = unit_or(twist + blend * mode.twist_dir, mode.twist_dir)
+    return hat_a, hat_b, hat_f
+
+
+class Solution(eqx.Module):
+    """A mode's solution at a state: accelerations (world a, alpha; body omega_dot), the
+    multipliers `lam` (6,) (N, N m: one per row slot), the rows and the geometry."""
+
+    acc: jax.Array
+    alpha: jax.Array
+    omega_dot: jax.Array
+    lam: jax.Array
+    rows: Rows
+    geom: Geometry
+    hats: tuple
+
+    def point_accelerations(self) -> jax.Array:
+        """World accelerations (P, 3) of the contact points (their gaps' and slips' rates)."""
+        g = self.geom
+        return self.acc + cross(self.alpha, g.r) + cross(g.w, g.r_dot)
+
+    def twist_rate(self, state, model, face) -> jax.Array:
+        """Rate of the face's slip twist."""
+        g = self.geom
+        _, centres, rhos = model.face_frame()
+        if not model.num_faces:
+            return jnp.zeros(3, state.pos.dtype)
+        rc = g.R @ centres[face]
+        ac = self.acc + cross(self.alpha, rc) + cross(g.w, cross(g.w, rc))
+        return jnp.stack([ac @ g.t1, ac @ g.t2, rhos[face] * (self.alpha @ g.n)])
+
+
+def solve_mode(t, state: State, mode: Mode, scene, model, tol, hats=None, geom=None) -> Solution:
+    """Accelerations and contact forces of `mode` at `state` (unit quaternion).
+
+    `tol`: the resolved `Tolerances`; its `stabilisation` beta (1/s) makes constraint
+    residuals of the holonomic rows decay like (1 + beta t) exp(-beta t) and slips of sticking
+    rows like exp(-beta t) instead of drifting (Baumgarte); on the constraint manifold it has
+    no effect. `hats`: the sliding directions (default: `sliding_hats`); `geom`: the state's
+    `geometry` if already computed.
+    """
+    beta = tol.stabilisation
+    body = scene.body
+    dtype = state.pos.dtype
+    if geom is None:
+        geom = geometry(state, scene, model, mode.seed)
+    if hats is None:
+        twist, _ = face_twist(state, geom, model, mode.face)
+        hats = sliding_hats(geom, twist, mode, tol.slip_blend)
+    rows = mode_rows(state, geom, mode, hats, scene.floor.friction, scene, model)
+    acc0, omega_dot0 = accelerations(t, state, scene)
+    u0_dot = jnp.concatenate([acc0, geom.R @ omega_dot0])
+    beta = jnp.asarray(beta, dtype)
+    stab = jnp.where(rows.holonomic, 2 * beta * rows.vel + beta**2 * rows.pos, beta * rows.vel)
+    minv_C = inverse_mass_columns(body, geom.R, rows.C)
+    lam = solve_rows(rows, minv_C, -(rows.J @ u0_dot + rows.bias + stab))
+    u_dot = u0_dot + lam @ minv_C
+    acc, alpha = u_dot[:3], u_dot[3:]
+    return Solution(acc, alpha, geom.R.T @ alpha, lam, rows, geom, hats)
+
+
+def unit_state(y: State) -> State:
+    return State(y.pos, quat_normalize(y.quat), y.vel, y.omega)
+
+
+def mode_rates(t, y: State, mode: Mode, scene, model, tol) -> State:
+    """d(state)/dt in `mode`: the right-hand side of a contact segment."""
+    sol = solve_mode(t, unit_state(y), mode, scene, model, tol)
+    return State(pos=y.vel, quat=quat_rate(y.quat, y.omega), vel=sol.acc, omega=sol.omega_dot)

@@ -1,0 +1,78 @@
+"""Keeping drift out: positions and velocities projected onto a mode's constraints at the
+start of each segment (docs/contact.md, section 5, step 6).
+
+Each projection is the smallest correction in the kinetic metric: delta u = M^-1 J^T nu with
+J delta u = -residual on the mode's rows, so it moves the body as an impulse at the contacts
+would. Positions take two Gauss-Newton steps (the residuals are at the integrator's error
+level, so the second leaves them at roundoff).
+"""
+
+import jax.numpy as jnp
+
+from .._linalg import solve as small_solve
+from .._quaternion import _safe_norm, axis_angle_to_quat, quat_multiply, quat_normalize
+from .._state import State
+from ._modes import FACE, PAIR, POINT, face_twist, geometry, inverse_mass_columns, mode_rows
+
+
+def _correction(rows_J, mask, residual, body, R):
+    """delta u (6,) = M^-1 J^T nu, with J delta u = -residual on the masked rows."""
+    dtype = residual.dtype
+    minv_Jt = inverse_mass_columns(body, R, rows_J)  # rows: M^-1 J_k
+    W = rows_J @ minv_Jt.T
+    both = mask[:, None] & mask[None, :]
+    eye = jnp.eye(6, dtype=dtype)
+    # a tiny regularisation keeps redundant rows (a pair's two rows along its line) solvable
+    scale = jnp.max(jnp.where(mask, jnp.abs(jnp.diagonal(W)), 0.0))
+    W = jnp.where(both, W, eye) + 1e-12 * scale * eye
+    nu = small_solve(W, jnp.where(mask, -residual, 0.0))
+    return jnp.where(mask, nu, 0.0) @ minv_Jt
+
+
+def _zero_hats(dtype):
+    z = jnp.zeros(3, dtype)
+    return z, z, z
+
+
+def project_positions(state: State, mode, scene, model, iterations: int = 2) -> State:
+    """Active gaps and a face's tilt brought to zero."""
+    dtype = state.pos.dtype
+    for _ in range(iterations):
+        geom = geometry(state, scene, model, mode.seed)
+        rows = mode_rows(state, geom, mode, _zero_hats(dtype), 0.0, scene, model)
+        delta = _correction(rows.J, rows.holonomic, rows.pos, scene.body, geom.R)
+        turn = delta[3:]
+        angle = _safe_norm(turn)
+        quat = quat_normalize(quat_multiply(axis_angle_to_quat(turn, angle), state.quat))
+        state = State(state.pos + delta[:3], quat, state.vel, state.omega)
+    return state
+
+
+def project_velocities(state: State, mode, scene, model, slip_stop) -> State:
+    """Normal velocities of the active contacts, and the slips of those that stick or start
+    to slide from rest (slip below `slip_stop`), brought to zero."""
+    dtype = state.pos.dtype
+    geom = geometry(state, scene, model, mode.seed)
+    rows = mode_rows(state, geom, mode, _zero_hats(dtype), 0.0, scene, model)
+    kind = mode.kind
+    still_a = _safe_norm(geom.slip[mode.a]) <= slip_stop
+    still_b = _safe_norm(geom.slip[mode.b]) <= slip_stop
+    still_f = _safe_norm(face_twist(state, geom, model, mode.face)[0]) <= slip_stop
+    point_like = (kind == POINT) | (kind == PAIR)
+    extra = jnp.where(
+        kind == FACE,
+        jnp.array([False, False, False, True, True, True]) & still_f,
+        jnp.stack(
+            [
+                False,
+                False,
+                point_like & still_a,
+                point_like & still_a,
+                (kind == PAIR) & still_b,
+                (kind == PAIR) & still_b,
+            ]
+        ),
+    )
+    delta = _correction(rows.J, rows.mask | extra, rows.vel, scene.body, geom.R)
+    w = geom.w + delta[3:]
+    return State(state.pos, state.quat, state.vel + delta[:3], geom.R.T @ w)

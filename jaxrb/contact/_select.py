@@ -1,0 +1,277 @@
+"""Choosing the next mode at an event: enumeration of the candidate modes of the touching
+features, each solved and tested against the complementarity conditions (docs/contact.md,
+section 3).
+
+All candidates are evaluated at once (vmap over the shape's candidate table) and the first
+consistent one in the table's order is taken: branch-free, so it jits and vmaps.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._quaternion import _safe_norm
+from ._events import AXIAL, CONE_A, CONE_B, COP, NORMAL_A, NORMAL_B, UNUSED, conditions
+from ._modes import (
+    FACE,
+    PAIR,
+    POINT,
+    active_points,
+    cross,
+    face_twist,
+    inverse_mass_columns,
+    solve_mode,
+    unit_or,
+)
+
+FIXED_POINT_ITERATIONS = 4
+DIRECTIONS = 64  # angles scanned for a sliding direction from rest
+REFINEMENTS = 10  # regula falsi steps on the chosen bracket
+
+
+def scan_direction(measure, n, t1, t2, dtype):
+    """The direction s (world, unit, in the floor plane) in which a contact at rest starts
+    to slide, given `measure(s)` -> (its slip acceleration a_t (3,) when friction opposes s,
+    whether the contact forces are then admissible): a_t must be kappa s, kappa >= 0. The
+    circle of directions is scanned, the bracket of a root of (a_t x s) . n with the fastest
+    admissible slip acceleration along s is refined by regula falsi. Returns (s, found)."""
+    step = 2 * jnp.pi / DIRECTIONS
+
+    def at(phi):
+        s = jnp.cos(phi) * t1 + jnp.sin(phi) * t2
+        a, admissible = measure(s)
+        return cross(a, s) @ n, a @ s, admissible
+
+    angle = jnp.arange(DIRECTIONS, dtype=dtype) * step
+    turn, along, admissible = jax.vmap(at)(angle)
+    nxt, along_nxt = jnp.roll(turn, -1), jnp.roll(along, -1)
+    bracket = ((turn <= 0) & (nxt > 0)) | ((turn >= 0) & (nxt < 0))
+    good = bracket & (jnp.maximum(along, along_nxt) >= 0) & admissible
+    best = jnp.argmax(jnp.where(good, jnp.maximum(along, along_nxt), -jnp.inf))
+
+    def regula_falsi(_, bracket):  # kept inside the bracket
+        lo, f_lo, hi, f_hi = bracket
+        mid = (lo * f_hi - hi * f_lo) / jnp.where(f_hi != f_lo, f_hi - f_lo, 1.0)
+        mid = jnp.clip(mid, jnp.minimum(lo, hi), jnp.maximum(lo, hi))
+        f_mid = at(mid)[0]
+        left = jnp.sign(f_mid) == jnp.sign(f_lo)
+        return (
+            jnp.where(left, mid, lo),
+            jnp.where(left, f_mid, f_lo),
+            jnp.where(left, hi, mid),
+            jnp.where(left, f_hi, f_mid),
+        )
+
+    lo, f_lo, hi, f_hi = jax.lax.fori_loop(
+        0, REFINEMENTS, regula_falsi, (angle[best], turn[best], angle[best] + step, nxt[best])
+    )
+    phi = jnp.where(jnp.abs(f_lo) < jnp.abs(f_hi), lo, hi)
+    _, along_root, admissible_root = at(phi)
+    found = jnp.any(good) & (along_root >= 0) & admissible_root
+    return jnp.cos(phi) * t1 + jnp.sin(phi) * t2, found
+
+
+def point_sliding_direction(b, K, mu, n, t1, t2):
+    """`scan_direction` for a single point contact at rest, in closed form: with the contact
+    point's acceleration a = b + K f under the contact force f = lambda_n (n - mu s),
+    lambda_n from n . a = 0 (admissible: lambda_n >= 0). `b` (3,) is the point's
+    acceleration without contact force, `K` (3, 3) its Delassus matrix (world)."""
+
+    def measure(s):
+        force_dir = n - mu * s
+        D = n @ K @ force_dir
+        lam = -(n @ b) / jnp.where(D != 0, D, 1.0)
+        a = b + lam * (K @ force_dir)
+        return a - (a @ n) * n, lam >= 0
+
+    return scan_direction(measure, n, t1, t2, b.dtype)
+
+
+class Choice(eqx.Module):
+    """The chosen mode and whether it satisfied every condition."""
+
+    mode: object
+    consistent: jax.Array
+
+
+def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip):
+    """Solve one candidate, finding the directions of any sliding that starts from rest by
+    fixed-point iteration (s_hat <- s'(s_hat) / |s'(s_hat)|). Returns (the mode with those
+    directions, its margins: all must be >= 0 for it to be consistent)."""
+    dtype = state.pos.dtype
+    zero3 = jnp.zeros(3, dtype)
+    twist, _ = face_twist(state, geom, model, mode.face)
+    slides_a = ((mode.kind == POINT) | (mode.kind == PAIR)) & ~mode.stick[0]
+    rest_a = slides_a & zero_slip[mode.a]
+    rest_b = (mode.kind == PAIR) & ~mode.stick[1] & zero_slip[mode.b]
+    rest_f = (mode.kind == FACE) & ~mode.stick[0] & (jnp.linalg.norm(twist) <= tol.slip_stop)
+
+    def solve(hats):
+        return solve_mode(t, state, mode, scene, model, tol, hats=hats, geom=geom)
+
+    # sliding from rest starts opposite to the friction that sticking would need (exactly so
+    # at the cone's boundary, where the slip's acceleration vanishes)
+    zero_hats = (zero3, zero3, zero3)
+    held = solve_mode(
+        t,
+        state,
+        eqx.tree_at(lambda m: m.stick, mode, jnp.ones(2, bool)),
+        scene,
+        model,
+        tol,
+        hats=zero_hats,
+        geom=geom,
+    )
+    lam, d = held.lam, held.rows.J[:, :3]
+    need_a = lam[2] * d[2] + lam[3] * d[3]
+    need_b = lam[4] * d[4] + lam[5] * d[5]
+    need_f = jnp.stack([lam[3], lam[4], lam[5] / held.rows.rho])
+    # a single point: its sliding direction in closed form (the others: fixed point below)
+    rows = held.rows
+    keep = np.array([0, 2, 3])  # rows: normal, t1, t2 at point a
+    Jp = rows.J[keep]
+    Kp = Jp @ inverse_mass_columns(scene.body, geom.R, Jp).T
+    frame = jnp.stack([geom.n, geom.t1, geom.t2])
+    # the point's acceleration without contact force: J u' - K lambda, plus the rows' bias
+    u_dot = jnp.concatenate([held.acc, held.alpha])
+    bp = frame.T @ (Jp @ u_dot - Kp @ lam[keep] + rows.bias[keep])
+    point_dir, found = point_sliding_direction(
+        bp, frame.T @ Kp @ frame, scene.floor.friction, *frame
+    )
+    # (none found: at the cone's edge the slip's acceleration vanishes along the direction
+    # opposite to the friction sticking needs, which the seed below already is)
+    need_a = jnp.where((mode.kind == POINT) & found, -point_dir, need_a)
+    hats0 = (
+        jnp.where(rest_a, unit_or(-need_a, zero3), unit_or(geom.slip[mode.a], zero3)),
+        jnp.where(rest_b, unit_or(-need_b, zero3), unit_or(geom.slip[mode.b], zero3)),
+        jnp.where(rest_f, unit_or(-need_f, zero3), unit_or(twist, zero3)),
+    )
+    # a pair with one end sliding and the other starting from rest: that end's direction
+    # by a scan with the sliding end's direction fixed (exact, as for a single point)
+    pair = mode.kind == PAIR
+    scan_b = pair & rest_b & ~rest_a
+
+    def end_measure(end, s):
+        hats = (jnp.where(end == 0, s, hats0[0]), jnp.where(end == 0, hats0[1], s), hats0[2])
+        sol = solve(hats)
+        acc = geom.tangential(sol.point_accelerations())
+        return acc[jnp.where(end == 0, mode.a, mode.b)], (sol.lam[0] >= 0) & (sol.lam[1] >= 0)
+
+    end = jnp.where(scan_b, 1, 0)
+    end_dir, end_found = scan_direction(
+        lambda s: end_measure(end, s), geom.n, geom.t1, geom.t2, dtype
+    )
+    exact_a = pair & rest_a & ~rest_b & end_found
+    exact_b = scan_b & end_found
+    hats0 = (
+        jnp.where(exact_a, end_dir, hats0[0]),
+        jnp.where(exact_b, end_dir, hats0[1]),
+        hats0[2],
+    )
+    small = 1e-6 * (1.0 + _safe_norm(held.acc))  # slip accelerations below this: keep the seed
+
+    def slip_rates(sol):
+        slip_acc = geom.tangential(sol.point_accelerations())
+        return slip_acc[mode.a], slip_acc[mode.b], sol.twist_rate(state, model, mode.face)
+
+    def follow(rest, rate, hat):  # a single point's direction is exact already
+        iterate = rest & (mode.kind != POINT) & (_safe_norm(rate) > small)
+        return jnp.where(iterate, unit_or(rate, hat), hat)
+
+    def iterate(_, hats):
+        sa, sb, st = slip_rates(solve(hats))
+        return (
+            follow(rest_a & ~exact_a, sa, hats[0]),
+            follow(rest_b & ~exact_b, sb, hats[1]),
+            follow(rest_f, st, hats[2]),
+        )
+
+    hats = jax.lax.fori_loop(0, FIXED_POINT_ITERATIONS, iterate, hats0)
+    sol = solve(hats)
+    P = model.num_points
+    force = conditions(sol, mode, model, scene, tol)[P:]
+    keep = jnp.array([True] * 5 + [False, False, True])  # not the slip speeds
+    force = jnp.where(keep, force, UNUSED)
+    gap_acc = sol.point_accelerations() @ geom.n
+    gap_margin = jnp.where(resting & ~active_points(model, mode), gap_acc, UNUSED)
+    # sliding from rest: the slip must accelerate along the direction friction opposes
+    sa, sb, st = slip_rates(sol)
+    align = jnp.stack(
+        [
+            jnp.where(rest_a, sa @ hats[0], UNUSED),
+            jnp.where(rest_b, sb @ hats[1], UNUSED),
+            jnp.where(rest_f, st @ hats[2], UNUSED),
+        ]
+    )
+    # the blend direction only for a slide from rest: any other slide's friction opposes its
+    # own slip exactly (a blend kept along the start direction would bias it all the way)
+    chosen = eqx.tree_at(
+        lambda m: (m.slide_dir, m.twist_dir, m.from_rest),
+        mode,
+        (
+            jnp.stack([jnp.where(rest_a, hats[0], zero3), jnp.where(rest_b, hats[1], zero3)]),
+            jnp.where(rest_f, hats[2], zero3),
+            jnp.stack([rest_a | rest_f, rest_b]),
+        ),
+    )
+    # a sticking face needs its slip twist at rest (its corners' slips may be larger)
+    still = jnp.where(
+        mode.kind == FACE,
+        ~mode.stick[0] | (jnp.linalg.norm(twist) <= tol.slip_stop),
+        ~(mode.stick[0] & ~zero_slip[mode.a]) & ~(mode.stick[1] & ~zero_slip[mode.b]),
+    )
+    return chosen, jnp.concatenate([gap_margin, force, align]), still
+
+
+def exclusions(table, candidates, model, old, trigger):
+    """Mask of the `candidates` that the event which ended the segment rules out (they would
+    re-enter the boundary just crossed); `trigger` indexes the condition vector, -1: none."""
+    P = model.num_points
+    old_active = active_points(model, old)
+    t_active = jnp.asarray(table.active)[candidates]
+    t_sticking = jnp.asarray(table.sticking)[candidates]
+    kind = jnp.asarray(table.kind)[candidates]
+    stick = jnp.asarray(table.stick)[candidates]
+    same_face = (kind == FACE) & (jnp.asarray(table.face)[candidates] == old.face)
+    old_face = old.kind == FACE
+    k = trigger - P
+    idx = jnp.arange(P, dtype=old.a.dtype)
+    # a normal force reached zero: that point (a face: all its points) stops carrying
+    lifted_a = jnp.where(old_face, old_active, idx == old.a)
+    ex_normal_a = jnp.any(t_active & lifted_a, axis=1)
+    ex_normal_b = jnp.any(t_active & (idx == old.b), axis=1)
+    # friction reached the cone: that point (or face) no longer sticks
+    ex_cone_a = jnp.where(old_face, same_face & stick[:, 0], t_sticking[:, old.a])
+    ex_cone_b = t_sticking[:, old.b]
+    same_pair = (
+        (kind == PAIR)
+        & (jnp.asarray(table.a)[candidates] == old.a)
+        & (jnp.asarray(table.b)[candidates] == old.b)
+    )
+    ex_axial = same_pair & stick[:, 0] & stick[:, 1]
+    return jnp.select(
+        [k == NORMAL_A, k == NORMAL_B, k == CONE_A, k == CONE_B, k == AXIAL, k == COP],
+        [ex_normal_a, ex_normal_b, ex_cone_a, ex_cone_b, ex_axial, same_face],
+        jnp.zeros(candidates.shape, bool),
+    )
+
+
+def select_mode(t, state, geom, old, trigger, scene, model, table, tol, resting, zero_slip):
+    """The next mode at an event (state after any impact). `resting`: (P,) points touching
+    with zero normal velocity; `zero_slip`: (P,) points whose slip is below slip_stop."""
+    candidates = table.candidates(resting)
+
+    def one(i):
+        mode = table.mode(i, old)
+        return _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip)
+
+    modes, margins, still = jax.vmap(one)(candidates)
+    t_active = jnp.asarray(table.active)[candidates]
+    admissible = jnp.all(~t_active | resting, axis=1) & still
+    admissible = admissible & ~exclusions(table, candidates, model, old, trigger)
+    violation = jnp.max(jnp.maximum(-margins, 0.0), axis=1)
+    ok = admissible & (violation <= tol.force)
+    any_ok = jnp.any(ok)
+    i = jnp.where(any_ok, jnp.argmax(ok), jnp.argmin(jnp.where(admissible, violation, jnp.inf)))
+    return Choice(mode=jax.tree.map(lambda x: x[i], modes), consistent=any_ok)

@@ -1,0 +1,102 @@
+"""A step-size limit that keeps the solver from stepping over a brief touch of the floor.
+
+diffrax looks for an event only at the ends of each step: a corner of a fast-spinning die
+can dip under the floor and come back up within one step, and the touch is missed. The
+limit below bounds every step so that no free contact point can reach the floor within it,
+unless the step is already so short that the deepest dip it could hide is a quarter of the
+contact tolerance (docs/contact.md, section 4):
+
+    h_i = largest h with  v_i h + A_i h^2 / 2 <= k g_i,       h = max(min_i h_i, h_floor),
+
+for each contact point i the mode does not hold, with gap g_i > 0, approach speed
+v_i = max(-g_i', 0) and A_i twice its acceleration's magnitude (a bound over the step);
+k = 1/2, and h_floor = sqrt(2 contact_tol / A) (A the largest A_i), below which a dip of a
+point with acceleration A can reach A h^2 / 8 = contact_tol / 4 at most. The gap then
+shrinks by about half per step until h_floor; a real touch is crossed and found in a few
+steps. Far from the floor the limit is inactive.
+"""
+
+import diffrax as dfx
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from ._modes import active_points, solve_mode, unit_state
+
+SHRINK = 0.5  # k: the fraction of a gap a step may close
+
+
+def gap_step_limit(t, y, mode, offsets, scene, model, tol) -> jax.Array:
+    """The largest step (s) from state `y` in `mode` (module docstring); `offsets`: the
+    gap conditions' start shifts (a point whose gap starts at its boundary is not limited:
+    it is the contact the segment began on)."""
+    # no derivative flows through a step size: stop it at the inputs, so that no tangent
+    # of the computation below is traced at all
+    t, y, mode, offsets, scene = jax.tree.map(
+        lambda x: jax.lax.stop_gradient(x) if eqx.is_inexact_array(x) else x,
+        (t, y, mode, offsets, scene),
+    )
+    sol = solve_mode(t, unit_state(y), mode, scene, model, tol)
+    geom = sol.geom
+    P = model.num_points
+    dtype = geom.gap.dtype
+    free = ~active_points(model, mode) & (offsets[:P] == 0) & (geom.gap > 0)
+    gap = jnp.where(free, geom.gap, 1.0)
+    speed = jnp.maximum(-geom.gap_rate, 0.0)
+    acc = 2.0 * jnp.linalg.norm(sol.point_accelerations(), axis=-1) + jnp.finfo(dtype).tiny
+    room = SHRINK * gap
+    # v h + A h^2 / 2 = room, in the form that does not cancel
+    h = 2.0 * room / (speed + jnp.sqrt(speed**2 + 2.0 * acc * room))
+    h_points = jnp.where(free, h, jnp.inf)
+    h_floor = jnp.sqrt(2.0 * tol.contact / jnp.max(jnp.where(free, acc, jnp.finfo(dtype).tiny)))
+    return jnp.maximum(jnp.min(h_points), h_floor)
+
+
+class GapLimitedSteps(dfx.AbstractStepSizeController):
+    """Wraps the user's step-size controller: every step it proposes is cut to
+    `limit(t, y, args)` (s) from the state the step starts at."""
+
+    inner: dfx.AbstractStepSizeController
+    limit: callable = eqx.field(static=True)
+
+    def wrap(self, direction):
+        return GapLimitedSteps(self.inner.wrap(direction), self.limit)
+
+    def init(self, terms, t0, t1, y0, dt0, args, func, error_order):
+        t_next, state = self.inner.init(terms, t0, t1, y0, dt0, args, func, error_order)
+        return jnp.minimum(t_next, t0 + self.limit(t0, y0, args)), state
+
+    def adapt_step_size(self, t0, t1, y0, y1_candidate, args, y_error, error_order, state):
+        keep, next_t0, next_t1, jump, state, result = self.inner.adapt_step_size(
+            t0, t1, y0, y1_candidate, args, y_error, error_order, state
+        )
+        start = jax.tree.map(lambda a, b: jnp.where(keep, a, b), y1_candidate, y0)
+        next_t1 = jnp.minimum(next_t1, next_t0 + self.limit(next_t0, start, args))
+        return keep, next_t0, next_t1, jump, state, result
+
+
+class GapLimitedAdaptiveSteps(GapLimitedSteps, dfx.AbstractAdaptiveStepSizeController):
+    """`GapLimitedSteps` around an adaptive controller (its tolerances stay visible, e.g.
+    to an implicit solver's root finder)."""
+
+    @property
+    def rtol(self):
+        return self.inner.rtol
+
+    @property
+    def atol(self):
+        return self.inner.atol
+
+    @property
+    def norm(self):
+        return self.inner.norm
+
+    def wrap(self, direction):
+        return GapLimitedAdaptiveSteps(self.inner.wrap(direction), self.limit)
+
+
+def limited(controller, limit):
+    """`controller` with its steps cut to `limit(t, y, args)`."""
+    if isinstance(controller, dfx.AbstractAdaptiveStepSizeController):
+        return GapLimitedAdaptiveSteps(controller, limit)
+    return GapLimitedSteps(controller, limit)

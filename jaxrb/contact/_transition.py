@@ -1,0 +1,163 @@
+"""What happens at an event (docs/contact.md, section 5): the touching set, the impact (all
+touching points at once), the limit of a bounce series, the next mode, and the projection."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._dynamics import accelerations
+from .._invariants import energy
+from .._quaternion import _safe_norm
+from .._state import State
+from ._events import COP
+from ._impact_law import solve_impacts
+from ._modes import (
+    FACE,
+    CandidateTable,
+    Mode,
+    active_points,
+    cross,
+    geometry,
+    solve_mode,
+    unit_state,
+)
+from ._projection import project_positions, project_velocities
+from ._select import select_mode
+
+NEWTON, FRICTIONLESS, HELD, PLASTIC = 0, 1, 2, 3  # the impact variants of `solve_impacts`
+
+
+class EventOutcome(eqx.Module):
+    """The state and mode after an event, and what happened there.
+
+    `impact`: whether a touching point approached (an impact); then `impulse` (N s, world),
+    `point` (m, world), `speed` (largest approach speed, m/s) and `energy_lost` (J) describe
+    it. `merged`: the bounce series was replaced by its limit, which would have ended at
+    `rest_time`. `guarded`: the frictionless impulse replaced one that would add energy.
+    `inconsistent`: no candidate mode met every condition. `energy_rise` (J, >= 0) and
+    `penetration` (m, >= 0) are for the log.
+    """
+
+    state: State
+    mode: Mode
+    impact: jax.Array
+    impulse: jax.Array
+    point: jax.Array
+    speed: jax.Array
+    energy_lost: jax.Array
+    merged: jax.Array
+    rest_time: jax.Array
+    guarded: jax.Array
+    inconsistent: jax.Array
+    energy_rise: jax.Array
+    penetration: jax.Array
+
+
+def _no_derivative(tree):
+    return jax.tree.map(lambda x: jax.lax.stop_gradient(x) if eqx.is_inexact_array(x) else x, tree)
+
+
+def _kinetic(body, state):
+    return 0.5 * body.mass * state.vel @ state.vel + 0.5 * state.omega @ (
+        body.inertia_matrix @ state.omega
+    )
+
+
+def at_event(t, y: State, mode: Mode, trigger, scene, model, tol) -> EventOutcome:
+    """Apply the maps of an event at time `t` to the state `y` reached in `mode`; `trigger`
+    is the index of the condition that ended the segment (-1: the start of the run)."""
+    table = CandidateTable(model)
+    body = scene.body
+    e = scene.floor.restitution
+    state = unit_state(y)
+    dtype = state.pos.dtype
+    energy0 = energy(scene, state)
+    geom = geometry(state, scene, model, mode.seed)
+    flat = jnp.asarray(model.flat_points)
+    touching = (geom.gap <= jnp.where(flat, tol.flat, tol.contact)) | active_points(model, mode)
+    # the impact points (a coin's caps: rings of rim points) and which of them touch
+    body_points, ring = model.impact_points(geom.R.T @ geom.n, mode.seed)
+    points = body_points @ geom.R.T
+    points_gap = (state.pos + points) @ geom.n - scene.floor.height
+    points_rate = (state.vel + cross(geom.w, points)) @ geom.n
+    hitting = points_gap <= jnp.where(ring, tol.flat, tol.contact)
+    approaching = hitting & (points_rate < -tol.slip_stop)
+    impact = jnp.any(approaching)
+    speed = jnp.max(jnp.where(approaching, -points_rate, 0.0))
+    penetration = jnp.maximum(-jnp.min(jnp.where(flat, jnp.inf, geom.gap)), 0.0)
+
+    # the impact three ways; Newton-Coulomb unless it adds energy; its bounce series' limit
+    hits = solve_impacts(state, geom, points, hitting, scene, tol)
+    pick = lambda k: jax.tree.map(lambda x: x[k], hits)  # noqa: E731
+    newton = pick(NEWTON)
+    kinetic0 = _kinetic(body, state)
+    allowed = 1e-12 * kinetic0 + jnp.finfo(dtype).tiny
+
+    def gains(outcome):
+        return _kinetic(body, outcome.state) - kinetic0 > allowed
+
+    guarded = gains(newton)
+    smooth = pick(FRICTIONLESS)
+    plastic = gains(smooth)
+    smooth = jax.tree.map(lambda a, b: jnp.where(plastic, b, a), smooth, pick(PLASTIC))
+    hit = jax.tree.map(lambda a, b: jnp.where(guarded, b, a), newton, smooth)
+    v, w = hit.state.vel, geom.R @ hit.state.omega
+    leaving = (v + cross(w, points)) @ geom.n
+    bounce = jnp.max(jnp.where(hitting, leaving, 0.0))
+    acc0, _ = accelerations(t, state, scene)
+    pressing = -(acc0 @ geom.n)  # > 0: the forces press the body onto the floor
+    merged = impact & (pressing > 0) & (bounce > tol.slip_stop) & (bounce < tol.rest_speed)
+    hit = jax.tree.map(lambda a, b: jnp.where(merged, b, a), hit, pick(HELD))
+    one_minus_e = jnp.where(e < 1, 1 - e, 1.0)
+    rest_time = jnp.where(
+        merged, t + 2 * bounce / (jnp.where(pressing > 0, pressing, 1.0) * one_minus_e), jnp.inf
+    )
+    state = jax.tree.map(lambda a, b: jnp.where(impact, a, b), hit.state, state)
+
+    # the next mode (a flat cap's rim needs to know where the body tips: the seed)
+    if model.needs_seed:
+        old = solve_mode(t, *_no_derivative((state, mode, scene)), model, tol)
+        couple = geom.R.T @ (old.lam[1] * geom.t1 + old.lam[2] * geom.t2)
+        normals, _, _ = model.face_frame()
+        tipped = (mode.kind == FACE) & (trigger == model.num_points + COP)
+        cop_offset = cross(couple, normals[mode.face])
+        down = jax.lax.stop_gradient(geom.R.T @ geom.n)
+        seed = model.rim_seed(down, jnp.where(tipped, cop_offset, 0.0), mode.seed)
+        mode = eqx.tree_at(lambda m: m.seed, mode, seed)
+    geom = geometry(state, scene, model, mode.seed)
+    resting = touching & (jnp.abs(geom.gap_rate) <= tol.slip_stop)
+    zero_slip = _safe_norm(geom.slip) <= tol.slip_stop
+    trigger = jnp.where(impact, -1, trigger)
+    # the choice of mode is discrete; of its continuous parts (the direction a slide from
+    # rest starts in, a flat cap's seed) no derivative is taken: that keeps the reverse pass
+    # small, and they matter only while the slip is below the blend speed
+    choice = select_mode(
+        t,
+        *_no_derivative((state, geom, mode)),
+        trigger,
+        _no_derivative(scene),
+        model,
+        table,
+        tol,
+        resting,
+        zero_slip,
+    )
+    new_mode = choice.mode
+    state = project_positions(state, new_mode, scene, model)
+    state = project_velocities(state, new_mode, scene, model, tol.slip_stop)
+    energy1 = energy(scene, state)
+    return EventOutcome(
+        state=state,
+        mode=new_mode,
+        impact=impact,
+        impulse=hit.impulse,
+        point=hit.point,
+        speed=speed,
+        energy_lost=energy0 - energy1,
+        merged=merged,
+        rest_time=rest_time,
+        guarded=impact & guarded,
+        inconsistent=~choice.consistent | (impact & ~hit.consistent),
+        energy_rise=jnp.maximum(energy1 - energy0, 0.0),
+        penetration=penetration,
+    )

@@ -1,0 +1,242 @@
+"""Impacts with the floor: bouncing ball against closed forms, gradients across impacts,
+the multi-point impact law (energy, friction cone, numbering), tumbling dice and coins,
+vmap batches and bad input."""
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxrb
+from jaxrb.analytic import ball_apex_heights, ball_height, ball_impact_times, ball_rest_time
+from jaxrb.contact._features import contact_model
+from jaxrb.contact._modes import flight_mode, geometry
+from jaxrb.contact._transition import at_event
+
+G = 9.81
+R_BALL = 0.1
+TOL = dict(rtol=1e-10, atol=1e-10)
+
+
+def _ball_scene(e, mu=0.0):
+    body = jaxrb.RigidBody(1.0, shape=jaxrb.Sphere(R_BALL))
+    return jaxrb.Scene(body, forces=(jaxrb.Gravity(),), floor=jaxrb.Floor(e, mu))
+
+
+@functools.partial(jax.jit, static_argnames="throw")
+def _ball_run(h0, v0, e, ts, throw=False):
+    state0 = jaxrb.make_state(
+        pos=jnp.stack([0.0 * h0, 0.0 * h0, h0 + R_BALL]), vel=jnp.stack([0.0 * v0, 0.0 * v0, v0])
+    )
+    return jaxrb.simulate(_ball_scene(e), state0, ts, throw=throw, **TOL)
+
+
+def test_ball_impact_times_apex_and_rest():
+    h0, e, n = 1.0, 0.7, 12
+    t_imp = np.asarray(ball_impact_times(h0, e, n))
+    apex_t = t_imp + e ** np.arange(1, n + 1) * np.sqrt(2 * G * h0) / G  # apex after each bounce
+    ts = jnp.asarray(np.concatenate([[0.0], apex_t, [5.0]]))
+    traj = _ball_run(h0, 0.0, e, ts)
+    assert traj.result == jaxrb.RESULTS.successful
+    rec = traj.impacts
+    count = int(rec.count)
+    assert count > n
+    assert np.max(np.abs(np.asarray(rec.time[:n]) - t_imp)) < 1e-9
+    apex = np.asarray(traj.states.pos[1 : n + 1, 2]) - R_BALL
+    # to the solver's tolerance (atol 1e-10 m): each later bounce is slower and lower
+    np.testing.assert_allclose(apex, np.asarray(ball_apex_heights(h0, e, n)), rtol=1e-9, atol=1e-10)
+    assert abs(float(rec.rest_time) - float(ball_rest_time(h0, e))) < 1e-8
+    # at rest on the floor at the end, nothing moves
+    np.testing.assert_allclose(np.asarray(traj.states.pos[-1]), [0, 0, R_BALL], atol=1e-12)
+    np.testing.assert_allclose(np.asarray(traj.states.vel[-1]), 0.0, atol=1e-12)
+    # energy lost at each impact: (1 - e^2) of the incoming kinetic energy
+    un = np.asarray(rec.normal_speed[:count])
+    lost = np.asarray(rec.energy_lost[:count])
+    np.testing.assert_allclose(
+        lost[: count - 1], 0.5 * (1 - e**2) * un[: count - 1] ** 2, rtol=1e-12
+    )
+    assert np.all(lost >= 0)
+    np.testing.assert_allclose(np.asarray(rec.impulse[:n, 2]), (1 + e) * un[:n], rtol=1e-12)
+
+
+def test_ball_height_matches_closed_form():
+    h0, e, v0 = 0.8, 0.6, 1.5
+    ts = jnp.linspace(0.0, 3.0, 14)
+    traj = _ball_run(h0, v0, e, ts)
+    height = np.asarray(traj.states.pos[:, 2]) - R_BALL
+    exact = np.asarray(ball_height(ts, h0, e, v0=v0))
+    # after the (merged) Zeno series the bounce heights are below rest_speed^2/(2g) ~ 5e-6 m
+    assert np.max(np.abs(height - exact)) < 1e-8
+    assert np.min(height) > -1e-10
+
+
+def _height_at(params, T):
+    h0, v0, e = params
+    ts = jnp.linspace(0.0, 1.0, 14) * T  # same shape as the other ball tests: one compile
+    return _ball_run(h0, v0, e, ts).states.pos[-1, 2] - R_BALL
+
+
+_height_grad = jax.jit(jax.grad(_height_at))  # one compilation for every T
+
+
+def test_ball_gradients_across_impacts():
+    h0, v0, e = 1.0, 0.5, 0.7
+    t_imp = np.asarray(ball_impact_times(h0, e, 3, v0=v0))
+    params = jnp.array([h0, v0, e])
+    for T in (0.5 * (t_imp[0] + t_imp[1]), 0.5 * (t_imp[1] + t_imp[2])):  # after 1 and 2 impacts
+        grad = np.asarray(_height_grad(params, T))
+        exact = np.asarray(jax.grad(lambda p, T=T: ball_height(T, p[0], p[2], v0=p[1]))(params))
+        np.testing.assert_allclose(grad, exact, rtol=1e-7, atol=1e-9)
+        eps = 1e-4  # central differences: truncation ~eps^2, solver noise ~1e-12 / eps
+        fd = [
+            (
+                float(_height_at(params.at[i].add(eps), T))
+                - float(_height_at(params.at[i].add(-eps), T))
+            )
+            / (2 * eps)
+            for i in range(3)
+        ]
+        np.testing.assert_allclose(grad, fd, rtol=1e-6, atol=1e-7)
+
+
+def _spin_ball_final(params):
+    """A ball thrown with backspin bounces once on a floor with friction, in quadratic drag."""
+    mu, drag, moment, h0 = params
+    body = jaxrb.RigidBody(1.0, inertia=moment * jnp.ones(3), shape=jaxrb.Sphere(R_BALL))
+    scene = jaxrb.Scene(
+        body, forces=(jaxrb.Gravity(), jaxrb.QuadraticDrag(drag)), floor=jaxrb.Floor(0.7, mu)
+    )
+    state0 = jaxrb.make_state(
+        pos=jnp.stack([0.0 * h0, 0.0 * h0, h0 + R_BALL]),
+        vel=(2.0, 0.0, 0.0),
+        omega=(0.0, -30.0, 0.0),
+    )
+    traj = jaxrb.simulate(scene, state0, jnp.array([0.0, 0.55]), throw=False, **TOL)
+    s = traj.states
+    return jnp.stack([s.pos[-1, 0], s.pos[-1, 2], s.vel[-1, 0], s.omega[-1, 1]]), traj.impacts.count
+
+
+_spin_ball_jacobian = jax.jit(jax.jacrev(lambda p: _spin_ball_final(p)[0]))
+_spin_ball = jax.jit(_spin_ball_final)
+
+
+@pytest.mark.parametrize("mu", [0.2, 0.6], ids=["sliding", "sticking"])
+def test_gradients_across_impact_wrt_friction_drag_inertia(mu):
+    """d(final state)/d(friction, drag coefficient, moment of inertia, height) vs central
+    differences, through one impact that slides (mu = 0.2) or sticks (mu = 0.6)."""
+    params = jnp.array([mu, 0.02, 0.004, 0.5])
+    _, count = _spin_ball(params)
+    assert int(count) == 1
+    jac = np.asarray(_spin_ball_jacobian(params))
+    for i in range(4):
+        # solver noise in the post-impact state ~1e-9 (tolerance 1e-10, times impulse/inertia
+        # factors), so central differences need eps ~1e-4 relative: noise / eps ~ 1e-5
+        eps = 1e-4 * float(params[i])
+        up = np.asarray(_spin_ball(params.at[i].add(eps))[0])
+        down = np.asarray(_spin_ball(params.at[i].add(-eps))[0])
+        np.testing.assert_allclose(jac[:, i], (up - down) / (2 * eps), rtol=1e-5, atol=1e-5)
+    # in the sliding impact the friction coefficient moves the outgoing velocity; when the
+    # contact sticks, friction no longer matters but the moment of inertia does
+    if mu == 0.2:
+        assert abs(jac[2, 0]) > 0.1
+    else:
+        assert abs(jac[2, 0]) < 1e-6 and abs(jac[2, 2]) > 1.0
+
+
+# ------------------------------------------------------------------ impact law
+
+A_DIE = 0.008
+_LAW_TOL = jaxrb.contact.ContactOptions().resolved(jnp.float64)
+_SHUFFLED = np.array([5, 2, 7, 0, 3, 6, 1, 4])  # another numbering of a box's 8 corners
+
+
+@jax.jit
+def _face_landing(key, e, mu):
+    """A box with unequal sides lying flat (its four bottom corners touch) hit with random
+    velocities: the impact law with the corners numbered two ways, and the whole event map."""
+    k = jax.random.split(key, 2)
+    shape = jaxrb.Box(jnp.array([A_DIE, 1.3 * A_DIE, 0.8 * A_DIE]))
+    body = jaxrb.RigidBody(0.004, shape=shape)
+    scene = jaxrb.Scene(body, forces=(jaxrb.Gravity(),), floor=jaxrb.Floor(e, mu))
+    state = jaxrb.State(
+        jnp.array([0.0, 0.0, 0.8 * A_DIE]),
+        jnp.array([1.0, 0.0, 0.0, 0.0]),
+        jax.random.normal(k[0], (3,)) - jnp.array([0.0, 0.0, 1.0]),
+        40.0 * jax.random.normal(k[1], (3,)),
+    )
+    model = contact_model(shape)
+    geom = geometry(state, scene, model, jnp.zeros(3))
+    touching = geom.gap <= 1e-12
+    law = jaxrb.contact.solve_impacts(state, geom, geom.r, touching, scene, _LAW_TOL)
+    renumbered = jaxrb.contact.solve_impacts(
+        state, geom, geom.r[_SHUFFLED], touching[_SHUFFLED], scene, _LAW_TOL
+    )
+    mode = flight_mode(jnp.float64)
+    trigger = jnp.argmax(touching)  # the gap condition of a touching corner fired
+    event = at_event(0.0, state, mode, trigger, scene, model, _LAW_TOL)
+
+    def kinetic(s):
+        return 0.5 * body.mass * s.vel @ s.vel + 0.5 * s.omega @ (body.inertia_matrix @ s.omega)
+
+    return kinetic(state), jax.vmap(kinetic)(law.state), law, renumbered, event, jnp.sum(touching)
+
+
+def test_impact_law_face_landings(getkey):
+    """Face landings (four touching corners, solved together): the outcome does not depend
+    on how the corners are numbered; the Newton-Coulomb impulse pushes and stays in the
+    friction cone; the frictionless plastic impulse always dissipates; and the event map
+    (which falls back to the frictionless, then the plastic impulse where Newton's law
+    would add energy) never adds energy for e <= 1."""
+    n = 128
+    keys = jax.random.split(getkey(), n)
+    es = jax.random.uniform(getkey(), (n,))
+    mus = jax.random.uniform(getkey(), (n,), maxval=1.5)
+    k0, k1, law, renumbered, event, touching = jax.vmap(_face_landing)(keys, es, mus)
+    assert np.all(np.asarray(touching) == 4)
+    for a, b in ((law.state.vel, renumbered.state.vel), (law.state.omega, renumbered.state.omega)):
+        a, b = np.asarray(a), np.asarray(b)
+        scale = np.max(np.abs(a), axis=-1, keepdims=True)
+        assert np.max(np.abs(a - b) / scale) < 1e-9
+    k0, k1 = np.asarray(k0), np.asarray(k1)
+    assert np.all(k1[:, 3] <= k0 * (1 + 1e-12))  # plastic: -Lambda^T W Lambda / 2 <= 0
+    jn = np.asarray(law.impulse[:, 0, 2])
+    jt = np.linalg.norm(np.asarray(law.impulse[:, 0, :2]), axis=1)
+    assert np.all(jn > 0)
+    assert np.all(jt <= np.asarray(mus) * jn * (1 + 1e-6))
+    assert np.all(np.asarray(event.impact))
+    lost = np.asarray(event.energy_lost)
+    assert np.all(lost >= -1e-12 * k0), lost.min()
+    assert np.all(np.asarray(event.energy_rise) <= 1e-12 * k0)
+
+
+def test_frictionless_e1_single_point_conserves_energy(getkey):
+    """One touching point, no friction, e = 1: the normal speed reverses exactly and the
+    kinetic energy is conserved (the same law, reduced to Newton's for one point)."""
+    shape = jaxrb.Box(jnp.array([A_DIE, 1.3 * A_DIE, 0.8 * A_DIE]))
+    body = jaxrb.RigidBody(0.004, shape=shape)
+    scene = jaxrb.Scene(body, forces=(jaxrb.Gravity(),), floor=jaxrb.Floor(1.0, 0.0))
+    model = contact_model(shape)
+    for _ in range(3):
+        q = jaxrb.quat_normalize(jax.random.normal(getkey(), (4,)))
+        state = jaxrb.State(
+            jnp.zeros(3),
+            q,
+            jax.random.normal(getkey(), (3,)),
+            30.0 * jax.random.normal(getkey(), (3,)),
+        )
+        geom = geometry(state, scene, model, jnp.zeros(3))
+        low = int(jnp.argmin(geom.gap))
+        touching = jnp.arange(8) == low
+        out = jaxrb.contact.solve_impacts(state, geom, geom.r, touching, scene, _LAW_TOL)
+        after = jax.tree.map(lambda x: x[0], out.state)
+        w_after = geom.R @ after.omega
+        un_before = float(geom.gap_rate[low])
+        un_after = float((after.vel + jnp.cross(w_after, geom.r[low]))[2])
+        if un_before < 0:
+            assert un_after == pytest.approx(-un_before, rel=1e-10)
+        kin = lambda s: (
+            0.5 * body.mass * s.vel @ s.vel + 0.5 * s.omega @ (body.inertia_matrix @ s.omega)
+        )  # noqa: E731
+        assert float(kin(after)) == pytest.approx(float(kin(state)), rel=1e-12)
