@@ -206,7 +206,7 @@ def _face_slide_reference(mu, v0, wz0, rho, k):
 def test_die_slides_to_rest_on_its_face():
     """A die lying on a face, sliding and spinning, against the limit-surface equations
     integrated by scipy: the position at half the stop time, the stop time, and the final
-    position and yaw at rest (exactly at rest: zero velocities)."""
+    position and yaw at rest."""
     mu, vx, vy, wz = 0.3, 0.4, -0.25, 30.0
     scene = _sliding_die(mu, drag=0.0, damping=0.0)
     rho = A_DIE * (np.sqrt(2) + np.arcsinh(1.0)) / 3  # mean distance over a square face
@@ -221,12 +221,14 @@ def test_die_slides_to_rest_on_its_face():
     assert float(traj.contact.event_time[1]) == pytest.approx(T, abs=1e-5)
     np.testing.assert_allclose(np.asarray(traj.states.pos[1, :2]), ref.sol(0.5 * T)[:2], atol=1e-9)
     end = ref.sol(T)
-    for k_save in (2, 3):  # at rest, exactly
+    for k_save in (2, 3):  # at rest: sticking, velocities at roundoff level (the stuck
+        # face's constrained equations integrate accelerations of roundoff size)
+        assert not bool(traj.contact.sliding[k_save])
         np.testing.assert_allclose(
             np.asarray(traj.states.pos[k_save]), [end[0], end[1], A_DIE], rtol=0, atol=1e-9
         )
-        np.testing.assert_array_equal(np.asarray(traj.states.vel[k_save]), 0.0)
-        np.testing.assert_array_equal(np.asarray(traj.states.omega[k_save]), 0.0)
+        np.testing.assert_allclose(np.asarray(traj.states.vel[k_save]), 0.0, atol=1e-12)
+        np.testing.assert_allclose(np.asarray(traj.states.omega[k_save]), 0.0, atol=1e-12)
         q = traj.states.quat[k_save]
         yaw = 2 * np.arctan2(float(q[3]), float(q[0]))
         np.testing.assert_allclose(yaw, end[4], rtol=0, atol=1e-8)
