@@ -461,6 +461,12 @@ def solve_mode(t, state: State, mode: Mode, scene, model, tol, hats=None, geom=N
     return Solution(acc, alpha, geom.R.T @ alpha, lam, rows, geom, hats)
 
 
+def no_derivative(tree):
+    """`tree` with no derivative flowing through its float arrays (stopped at the inputs,
+    so that no tangent of a computation on them is traced at all)."""
+    return jax.tree.map(lambda x: jax.lax.stop_gradient(x) if eqx.is_inexact_array(x) else x, tree)
+
+
 def unit_state(y: State) -> State:
     return State(y.pos, quat_normalize(y.quat), y.vel, y.omega)
 

@@ -21,7 +21,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._modes import active_points, solve_mode, unit_state
+from ._modes import active_points, no_derivative, solve_mode, unit_state
 
 SHRINK = 0.5  # k: the fraction of a gap a step may close
 
@@ -32,10 +32,7 @@ def gap_step_limit(t, y, mode, offsets, scene, model, tol) -> jax.Array:
     it is the contact the segment began on)."""
     # no derivative flows through a step size: stop it at the inputs, so that no tangent
     # of the computation below is traced at all
-    t, y, mode, offsets, scene = jax.tree.map(
-        lambda x: jax.lax.stop_gradient(x) if eqx.is_inexact_array(x) else x,
-        (t, y, mode, offsets, scene),
-    )
+    t, y, mode, offsets, scene = no_derivative((t, y, mode, offsets, scene))
     sol = solve_mode(t, unit_state(y), mode, scene, model, tol)
     geom = sol.geom
     P = model.num_points

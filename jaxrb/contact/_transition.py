@@ -18,6 +18,7 @@ from ._modes import (
     active_points,
     cross,
     geometry,
+    no_derivative,
     solve_mode,
     unit_state,
 )
@@ -51,10 +52,6 @@ class EventOutcome(eqx.Module):
     inconsistent: jax.Array
     energy_rise: jax.Array
     penetration: jax.Array
-
-
-def _no_derivative(tree):
-    return jax.tree.map(lambda x: jax.lax.stop_gradient(x) if eqx.is_inexact_array(x) else x, tree)
 
 
 def _kinetic(body, state):
@@ -116,7 +113,7 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol) -> EventOutcom
 
     # the next mode (a flat cap's rim needs to know where the body tips: the seed)
     if model.needs_seed:
-        old = solve_mode(t, *_no_derivative((state, mode, scene)), model, tol)
+        old = solve_mode(t, *no_derivative((state, mode, scene)), model, tol)
         couple = geom.R.T @ (old.lam[1] * geom.t1 + old.lam[2] * geom.t2)
         normals, _, _ = model.face_frame()
         tipped = (mode.kind == FACE) & (trigger == model.num_points + COP)
@@ -133,9 +130,9 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol) -> EventOutcom
     # small, and they matter only while the slip is below the blend speed
     choice = select_mode(
         t,
-        *_no_derivative((state, geom, mode)),
+        *no_derivative((state, geom, mode)),
         trigger,
-        _no_derivative(scene),
+        no_derivative(scene),
         model,
         table,
         tol,
