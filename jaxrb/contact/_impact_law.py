@@ -98,6 +98,7 @@ def _gauss_seidel(W, c, target, present, mu, bilateral, lam0, sweeps):
 
 
 POLISH_ITERATIONS = 3
+POLISH_MARGINS = (1e-9, 1e-2, -1e-2)  # relative distance inside the cone that counts as sticking
 
 
 def _polish(W, c, target, present, mu, bilateral, lam, margin):
@@ -139,20 +140,23 @@ def _polish(W, c, target, present, mu, bilateral, lam, margin):
         z = z0 + A.T @ jnp.where(rows, small_solve(G, jnp.where(rows, rhs - A @ z0, 0.0)), 0.0)
         return jnp.einsum("iab,ib->ia", B, jnp.where(unknown, z, 0.0).reshape(S, 3))
 
-    hats = -lam[:, 1:] / jnp.where(lt > 0, lt, 1.0)[:, None]  # the slip after, as friction says
+    hats0 = -lam[:, 1:] / jnp.where(lt > 0, lt, 1.0)[:, None]  # the slip after, as friction says
     speed = jnp.max(jnp.abs(c)) + tiny
-    best = solve(hats)
-    best_error = _violation(W, c, target, present, mu, bilateral, best)
-    for _ in range(POLISH_ITERATIONS):  # follow the slip after; keep the best iterate
+
+    def attempt(i, carry):  # first the directions friction says, then the slip after the best
+        best, best_error, hats = carry
         v = c + jnp.einsum("iajb,jb->ia", W, best)
         vt = _safe_norm(v[:, 1:])
-        slips = vt > 1e-6 * speed  # a slip of roundoff size tells no direction
+        slips = (i > 0) & (vt > 1e-6 * speed)  # a slip of roundoff size tells no direction
         hats = jnp.where(slips[:, None], v[:, 1:] / jnp.where(slips, vt, 1.0)[:, None], hats)
         trial = solve(hats)
         error = _violation(W, c, target, present, mu, bilateral, trial)
         better = error < best_error
-        best = jnp.where(better, trial, best)
-        best_error = jnp.where(better, error, best_error)
+        return jnp.where(better, trial, best), jnp.where(better, error, best_error), hats
+
+    # a loop, so that the solve is traced (and compiled) once
+    start = (jnp.zeros_like(lam), jnp.array(jnp.inf, dtype), hats0)
+    best, _, _ = jax.lax.fori_loop(0, 1 + POLISH_ITERATIONS, attempt, start)
     return best
 
 
@@ -219,14 +223,15 @@ def solve_impacts(state, geom, points, touching, scene, tol):
         lam = jax.lax.stop_gradient(lam)
         # polished three ways: a slot that Gauss-Seidel leaves near its cone's edge may stick
         # (on the edge) or slide; the best (or Gauss-Seidel's own solution) is kept
-        tries = [lam] + [
-            _polish(W, c, target, present, mu, bilateral, lam, margin)
-            for margin in (1e-9, 1e-2, -1e-2)
-        ]
-        errors = jnp.stack([_violation(W, c, target, present, mu, bilateral, x) for x in tries])
+        margins = jnp.array(POLISH_MARGINS, dtype)
+        polished = jax.vmap(
+            lambda margin: _polish(W, c, target, present, mu, bilateral, lam, margin)
+        )(margins)
+        tries = jnp.concatenate([lam[None], polished])
+        errors = jax.vmap(lambda x: _violation(W, c, target, present, mu, bilateral, x))(tries)
         # prefer an exact (polished) solution on ties: derivatives flow through it only
         best = jnp.argmin(errors.at[0].set(2.0 * errors[0] + tol.velocity))
-        lam = jnp.stack(tries)[best]
+        lam = tries[best]
         speed = jnp.max(jnp.abs(c))
         return (
             u + jnp.einsum("ia,iad->d", lam, minv),

@@ -50,24 +50,30 @@ def scan_direction(measure, n, t1, t2, dtype):
     good = bracket & (jnp.maximum(along, along_nxt) >= 0) & admissible
     best = jnp.argmax(jnp.where(good, jnp.maximum(along, along_nxt), -jnp.inf))
 
-    def regula_falsi(_, bracket):  # kept inside the bracket
-        lo, f_lo, hi, f_hi = bracket
-        mid = (lo * f_hi - hi * f_lo) / jnp.where(f_hi != f_lo, f_hi - f_lo, 1.0)
-        mid = jnp.clip(mid, jnp.minimum(lo, hi), jnp.maximum(lo, hi))
-        f_mid = at(mid)[0]
-        left = jnp.sign(f_mid) == jnp.sign(f_lo)
-        return (
-            jnp.where(left, mid, lo),
-            jnp.where(left, f_mid, f_lo),
-            jnp.where(left, hi, mid),
-            jnp.where(left, f_hi, f_mid),
-        )
+    def regula_falsi(_, bracket):  # kept inside the bracket; each end: (angle, at(angle))
+        lo, hi = bracket
+        (phi_lo, f_lo, _, _), (phi_hi, f_hi, _, _) = lo, hi
+        mid = (phi_lo * f_hi - phi_hi * f_lo) / jnp.where(f_hi != f_lo, f_hi - f_lo, 1.0)
+        mid = jnp.clip(mid, jnp.minimum(phi_lo, phi_hi), jnp.maximum(phi_lo, phi_hi))
+        new = (mid, *at(mid))
+        left = jnp.sign(new[1]) == jnp.sign(f_lo)
+        pick = lambda a, b: jax.tree.map(lambda x, y: jnp.where(left, x, y), a, b)  # noqa: E731
+        return pick(new, lo), pick(hi, new)
 
-    lo, f_lo, hi, f_hi = jax.lax.fori_loop(
-        0, REFINEMENTS, regula_falsi, (angle[best], turn[best], angle[best] + step, nxt[best])
+    nxt_ok = jnp.roll(admissible, -1)
+    lo, hi = jax.lax.fori_loop(
+        0,
+        REFINEMENTS,
+        regula_falsi,
+        (
+            (angle[best], turn[best], along[best], admissible[best]),
+            (angle[best] + step, nxt[best], along_nxt[best], nxt_ok[best]),
+        ),
     )
-    phi = jnp.where(jnp.abs(f_lo) < jnp.abs(f_hi), lo, hi)
-    _, along_root, admissible_root = at(phi)
+    # the end nearer the root, with what was measured there
+    phi, _, along_root, admissible_root = jax.tree.map(
+        lambda a, b: jnp.where(jnp.abs(lo[1]) < jnp.abs(hi[1]), a, b), lo, hi
+    )
     found = jnp.any(good) & (along_root >= 0) & admissible_root
     return jnp.cos(phi) * t1 + jnp.sin(phi) * t2, found
 
@@ -179,16 +185,20 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip):
         iterate = rest & (mode.kind != POINT) & (_safe_norm(rate) > small)
         return jnp.where(iterate, unit_or(rate, hat), hat)
 
-    def iterate(_, hats):
-        sa, sb, st = slip_rates(solve(hats))
-        return (
+    def iterate(_, carry):  # carry: (next directions, last directions, their solution)
+        hats = carry[0]
+        sol = solve(hats)
+        sa, sb, st = slip_rates(sol)
+        followed = (
             follow(rest_a & ~exact_a, sa, hats[0]),
             follow(rest_b & ~exact_b, sb, hats[1]),
             follow(rest_f, st, hats[2]),
         )
+        return followed, hats, sol
 
-    hats = jax.lax.fori_loop(0, FIXED_POINT_ITERATIONS, iterate, hats0)
-    sol = solve(hats)
+    # FIXED_POINT_ITERATIONS updates, then the solution with the last directions (one more
+    # pass of the same loop: the solve is traced, and compiled, once)
+    _, hats, sol = jax.lax.fori_loop(0, FIXED_POINT_ITERATIONS + 1, iterate, (hats0, hats0, held))
     P = model.num_points
     force = conditions(sol, mode, model, scene, tol)[P:]
     keep = jnp.array([True] * 5 + [False, False, True])  # not the slip speeds
