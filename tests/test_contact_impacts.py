@@ -4,6 +4,7 @@ vmap batches and bad input."""
 
 import functools
 
+import diffrax as dfx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -25,12 +26,13 @@ def _ball_scene(e, mu=0.0):
     return jaxrb.Scene(body, forces=(jaxrb.Gravity(),), floor=jaxrb.Floor(e, mu))
 
 
-@functools.partial(jax.jit, static_argnames="throw")
-def _ball_run(h0, v0, e, ts, throw=False):
+@functools.partial(jax.jit, static_argnames=("throw", "forward_mode"))
+def _ball_run(h0, v0, e, ts, throw=False, forward_mode=False):
     state0 = jaxrb.make_state(
         pos=jnp.stack([0.0 * h0, 0.0 * h0, h0 + R_BALL]), vel=jnp.stack([0.0 * v0, 0.0 * v0, v0])
     )
-    return jaxrb.simulate(_ball_scene(e), state0, ts, throw=throw, **TOL)
+    adjoint = dfx.ForwardMode() if forward_mode else None
+    return jaxrb.simulate(_ball_scene(e), state0, ts, throw=throw, adjoint=adjoint, **TOL)
 
 
 def test_ball_impact_times_apex_and_rest():
@@ -72,13 +74,14 @@ def test_ball_height_matches_closed_form():
     assert np.min(height) > -1e-10
 
 
-def _height_at(params, T):
+def _height_at(params, T, forward_mode=False):
     h0, v0, e = params
     ts = jnp.linspace(0.0, 1.0, 14) * T  # same shape as the other ball tests: one compile
-    return _ball_run(h0, v0, e, ts).states.pos[-1, 2] - R_BALL
+    return _ball_run(h0, v0, e, ts, forward_mode=forward_mode).states.pos[-1, 2] - R_BALL
 
 
-_height_grad = jax.jit(jax.grad(_height_at))  # one compilation for every T
+# forward mode, one compilation for every T (reverse mode: the friction tests below)
+_height_grad = jax.jit(jax.jacfwd(lambda p, T: _height_at(p, T, forward_mode=True)))
 
 
 def test_ball_gradients_across_impacts():
@@ -125,7 +128,8 @@ _spin_ball = jax.jit(_spin_ball_final)
 @pytest.mark.parametrize("mu", [0.2, 0.6], ids=["sliding", "sticking"])
 def test_gradients_across_impact_wrt_friction_drag_inertia(mu):
     """d(final state)/d(friction, drag coefficient, moment of inertia, height) vs central
-    differences, through one impact that slides (mu = 0.2) or sticks (mu = 0.6)."""
+    differences, through one impact that slides (mu = 0.2) or sticks (mu = 0.6); reverse
+    mode (`jax.jacrev`, diffrax's default checkpointed adjoint)."""
     params = jnp.array([mu, 0.02, 0.004, 0.5])
     _, count = _spin_ball(params)
     assert int(count) == 1

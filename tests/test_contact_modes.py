@@ -5,6 +5,7 @@ penetration / energy-gain cases."""
 
 import functools
 
+import diffrax as dfx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -20,12 +21,15 @@ PRECISE = dict(rtol=1e-12, atol=1e-12)
 # ------------------------------------------------------------------ a box on an edge
 
 
-@functools.partial(jax.jit, static_argnames="rest_speed")
-def _box_run(half, mass, e, mu, state0, ts, rest_speed=1e-6):
+@functools.partial(jax.jit, static_argnames=("rest_speed", "forward_mode"))
+def _box_run(half, mass, e, mu, state0, ts, rest_speed=1e-6, forward_mode=False):
     body = jaxrb.RigidBody(mass, shape=jaxrb.Box(half))
     scene = jaxrb.Scene(body, forces=(jaxrb.Gravity(),), floor=jaxrb.Floor(e, mu))
     options = jaxrb.contact.ContactOptions(rest_speed=rest_speed, max_impacts=16)
-    return jaxrb.simulate(scene, state0, ts, throw=False, contact=options, **PRECISE)
+    adjoint = dfx.ForwardMode() if forward_mode else None
+    return jaxrb.simulate(
+        scene, state0, ts, throw=False, contact=options, adjoint=adjoint, **PRECISE
+    )
 
 
 def _on_edge(half, tilt):
@@ -134,7 +138,7 @@ def test_die_pivots_on_an_edge_and_falls_onto_a_face():
     assert speed / (2 * a) == pytest.approx(w_land, rel=1e-6)
 
 
-def _second_impact_time(b):
+def _second_impact_time(b, forward_mode=False):
     """Rocking block of half-width b: the time of its second impact (s)."""
     d, h, m = 0.1, 0.25, 2.0
     half = jnp.stack([b, d + 0 * b, h + 0 * b])
@@ -142,16 +146,17 @@ def _second_impact_time(b):
     lowest = -jaxrb.Box(half).floor_distance(jnp.zeros(3), q, 0.0)
     state0 = jaxrb.make_state(pos=jnp.stack([0.0 * b, 0.0 * b, lowest]), quat=q)
     ts = jnp.linspace(0.0, 1.2, 4)
-    return _box_run(half, m, 0.0, 2.0, state0, ts).impacts.time[1]
+    return _box_run(half, m, 0.0, 2.0, state0, ts, forward_mode=forward_mode).impacts.time[1]
 
 
 def test_rocking_block_gradient_of_second_impact_time():
     """d(second impact time)/d(half-width) through two impacts and the rocking between them,
-    against central differences (1e-5)."""
+    against central differences (1e-5). Forward mode (quicker to compile than reverse mode;
+    reverse mode through impacts and mode changes: test_contact_impacts)."""
     b = 0.05
     t2 = float(_second_impact_time(jnp.asarray(b)))
     assert 0.3 < t2 < 1.2
-    grad = float(jax.grad(_second_impact_time)(jnp.asarray(b)))
+    grad = float(jax.jacfwd(lambda b: _second_impact_time(b, True))(jnp.asarray(b)))
     eps = 1e-5
     fd = (
         float(_second_impact_time(jnp.asarray(b + eps)))
@@ -249,6 +254,58 @@ def test_coin_spun_on_its_rim_comes_down_flat():
     dt = float(COIN_TS[1] - COIN_TS[0])
     # |omega| changes within a save interval: allow half as much again as its larger end
     assert np.all(turned <= 1.5 * dt * np.maximum(spin[1:], spin[:-1]) + 1e-9)
+
+
+def _slipping_coin(params, start):
+    """A coin set on its rim with the spin about its axis `params[1]` (rad/s, body z) instead
+    of the rolling value: its rim point slips, friction (`params[0]`) stops the slip, and it
+    rolls on. Returns its mass centre's (x, y) at t = 0.3 s and its contact log."""
+    mu, spin = params
+    state0 = jaxrb.State(start.pos, start.quat, start.vel, start.omega.at[2].set(spin))
+    options = jaxrb.contact.ContactOptions(max_impacts=16, max_events=64)
+    traj = jaxrb.simulate(
+        _coin_scene(mu, 0.0),
+        state0,
+        jnp.array([0.0, 0.1, 0.3]),
+        throw=False,
+        contact=options,
+        adjoint=dfx.ForwardMode(),
+        **PRECISE,
+    )
+    return traj.states.pos[-1, :2], (traj.result, traj.contact)
+
+
+# value and directional derivative in one compilation (central differences reuse the value)
+_slipping_coin_jvp = jax.jit(
+    lambda p, v, start: jax.jvp(lambda q: _slipping_coin(q, start), (p,), (v,), has_aux=True)
+)
+
+
+def test_rolling_coin_gradient_wrt_friction_and_spin():
+    """d(mass centre at 0.3 s)/d(friction, initial spin) of a coin whose rim slips at first
+    and then rolls (a slide -> stick mode change), forward mode, against central
+    differences (1e-5)."""
+    pytest.importorskip("sympy", reason="the rolling-disc start needs sympy ([test] extra)")
+    from rolling_disc_reference import rolling_disc_rhs
+
+    y0 = np.array([0.0, 0.3, 0.0, 0.0, 0.0, 0.5, -20.0, 1.0])  # rolls with spin -20 rad/s
+    start = _rolling_coin_start(rolling_disc_rhs(COIN_M, COIN_R, COIN_H, G), y0)
+    params = jnp.array([0.5, -23.0])
+    for i, eps in enumerate([1e-4, 1e-3]):
+        v = jnp.eye(2)[i]
+        _, tangent, (result, log) = _slipping_coin_jvp(params, v, start)
+        assert result == jaxrb.RESULTS.successful
+        # it slid at first, stopped slipping at an event and rolled on its rim from then on
+        sliding, kind = np.asarray(log.sliding), np.asarray(log.kind)
+        assert sliding[0] and not np.any(sliding[1:])
+        assert np.all(kind == jaxrb.contact.KIND_NAMES.index("point"))
+        causes = [jaxrb.contact.CAUSES[int(c)] for c in log.event_cause[: int(log.events) + 1]]
+        assert causes[1:] == ["slip stops"], causes  # slot 0: the start
+        up = np.asarray(_slipping_coin_jvp(params + eps * v, v, start)[0])
+        down = np.asarray(_slipping_coin_jvp(params - eps * v, v, start)[0])
+        fd = (up - down) / (2 * eps)
+        assert np.all(np.abs(fd) > 1e-4)  # both parameters move the coin
+        np.testing.assert_allclose(np.asarray(tangent), fd, rtol=1e-5)
 
 
 # ------------------------------------------------------------------ the reported cases

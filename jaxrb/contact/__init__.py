@@ -25,4 +25,4 @@ from ._features import (
 from ._impact_law import solve_impacts as solve_impacts
 from ._modes import KIND_NAMES as KIND_NAMES
 from ._options import ContactOptions as ContactOptions
-from ._record import ContactLog as ContactLog, ImpactRecord as ImpactRecord
+from ._record import CAUSES as CAUSES, ContactLog as ContactLog, ImpactRecord as ImpactRecord
