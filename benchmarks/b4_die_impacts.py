@@ -1,8 +1,9 @@
 # ruff: noqa: B023, E501  (closures are called inside their loop iteration; table strings)
-"""B4: a die (16 mm cube, 4.5 g) thrown onto the floor (restitution 0.5, Coulomb friction 0.3)
-under gravity, from heights U(0.1, 0.3) m with a random attitude, spin U(-30, 30) rad/s per
-body axis and horizontal speed U(-0.5, 0.5) m/s; T = 1.5 s, batch N (default 64: impacts are
-expensive), `jax.vmap(jaxrb.simulate)` with `throw=False`, `max_impacts` = 64.
+"""B4: a die (16 mm cube, 4.5 g) and a coin (radius 12 mm, thickness 2 mm, 7.5 g), each thrown
+onto the floor (restitution 0.5, Coulomb friction 0.3) under gravity, from heights U(0.1, 0.3) m with a random attitude, spin U(-30, 30) rad/s per
+body axis and horizontal speed U(-0.5, 0.5) m/s; T = 1.5 s, batch N dice (default 64: impacts
+are expensive) and N/4 coins (`--n-coins`: a coin rolls and spins on its rim with many
+stick/slip events), `jax.vmap(jaxrb.simulate)` with `throw=False`, `max_impacts` = 64.
 
 Error (per body, against a reference solve of the same throws with diffrax Dopri8 at
 rtol = atol = 1e-13, float64): the max over the save times of the position error (m), the max
@@ -22,9 +23,10 @@ Peers: scipy `solve_ivp` has terminal events but no impact, friction or resting-
 model, so there is no fair out-of-the-box scipy peer: jaxrb is reported alone over solvers and
 tolerances. MuJoCo (optional) uses soft contacts (no Newton restitution), a different model: its
 row is its cost per body for the same throws with its default contact (friction set to 0.3),
-N dice in one scene that do not collide with each other, and no error column.
+N bodies (a box, or a cylinder for the coin) in one scene that do not collide with each other,
+and no error column.
 
-Run: python -m benchmarks.b4_die_impacts --n 64 --out bench_out
+Run: python -m benchmarks.b4_die_impacts --n 64 --n-coins 16 --out bench_out
 """
 
 import argparse
@@ -53,6 +55,7 @@ except ImportError:
 T_END = 1.5
 HALF = 0.008  # m: a 16 mm die
 MASS = 0.0045  # kg
+COIN_RADIUS, COIN_HALF, COIN_MASS = 0.012, 0.001, 0.0075  # m, m, kg
 RESTITUTION = 0.5
 FRICTION = 0.3
 MAX_IMPACTS = 64
@@ -67,8 +70,11 @@ N_SAVE = 16
 _CODE_NAMES = {int(item._value): name for name, item in RESULTS._name_to_item.items()}
 
 
-def make_scene():
-    body = jaxrb.RigidBody(jnp.asarray(MASS), shape=jaxrb.Box(jnp.full(3, HALF)))
+def make_scene(shape="die"):
+    if shape == "die":
+        body = jaxrb.RigidBody(jnp.asarray(MASS), shape=jaxrb.Box(jnp.full(3, HALF)))
+    else:
+        body = jaxrb.RigidBody(jnp.asarray(COIN_MASS), shape=jaxrb.Cylinder(COIN_RADIUS, COIN_HALF))
     return jaxrb.Scene(body, forces=(jaxrb.Gravity(),), floor=jaxrb.Floor(RESTITUTION, FRICTION))
 
 
@@ -166,13 +172,14 @@ def detail_table(items, device):
     return head + "\n".join(lines) + "\n"
 
 
-def run(n=64, dtypes=("float64", "float32"), quick=False):
+def run(n=64, dtypes=("float64", "float32"), quick=False, shape="die"):
     states0 = initial_states(n)
     ts = jnp.linspace(0.0, T_END, N_SAVE)
     rows, items = [], []
+    problem = f"B4 {shape}"
 
     # reference: Dopri8 at 1e-13 through the same compiled function as the Dopri8 rows
-    dopri8_64 = solve_fn(make_scene(), ts, dfx.Dopri8())
+    dopri8_64 = solve_fn(make_scene(shape), ts, dfx.Dopri8())
     t0 = time.perf_counter()
     ref = jax.block_until_ready(dopri8_64(states0, jnp.asarray(REF_TOL)))
     ref_first = time.perf_counter() - t0
@@ -181,7 +188,7 @@ def run(n=64, dtypes=("float64", "float32"), quick=False):
     ref_best = time.perf_counter() - t0
     cr = codes(ref)
     ref_row = C.Row(
-        "B4",
+        problem,
         "reference: diffrax Dopri8, vmap(jaxrb.simulate)",
         "float64",
         f"tol {REF_TOL:.0e}",
@@ -197,7 +204,7 @@ def run(n=64, dtypes=("float64", "float32"), quick=False):
 
     for dname in dtypes:
         dt = jnp.float64 if dname == "float64" else jnp.float32
-        scene = G.cast(make_scene(), dt)
+        scene = G.cast(make_scene(shape), dt)
         s0 = G.cast(states0, dt)
         tsd = ts.astype(dt)
         if dname == "float64":
@@ -222,7 +229,7 @@ def run(n=64, dtypes=("float64", "float32"), quick=False):
                     msg = next((m for m in msg if m.strip()), "")[:160].replace("|", "/")
                     rows.append(
                         C.Row(
-                            "B4",
+                            problem,
                             method,
                             dname,
                             f"tol {tol:.0e}",
@@ -236,7 +243,7 @@ def run(n=64, dtypes=("float64", "float32"), quick=False):
                     break  # the same failure for every tolerance
                 d = detail(tr, ref)
                 row = C.Row(
-                    "B4",
+                    problem,
                     method,
                     dname,
                     f"tol {tol:.0e}",
@@ -250,18 +257,18 @@ def run(n=64, dtypes=("float64", "float32"), quick=False):
                 )
                 rows.append(row)
                 items.append((row, d))
-    rows += mujoco_rows(states0, quick)
+    rows += mujoco_rows(states0, quick, shape)
     return rows, items
 
 
-def mujoco_rows(states0, quick):
+def mujoco_rows(states0, quick, shape="die"):
     """Cost per body of MuJoCo's C engine on the same throws: a different (soft-contact) model."""
     try:
         import mujoco
     except ImportError:
         return [
             C.Row(
-                "B4",
+                f"B4 {shape}",
                 "MuJoCo C (not installed: pip install jaxrb[bench])",
                 "float64",
                 "-",
@@ -272,6 +279,10 @@ def mujoco_rows(states0, quick):
             )
         ]
     n = states0.pos.shape[0]
+    if shape == "die":
+        geom = f"type='box' size='{HALF} {HALF} {HALF}' mass='{MASS}'"
+    else:  # a cylinder's size: radius, half-height; its axis is body z as in jaxrb
+        geom = f"type='cylinder' size='{COIN_RADIUS} {COIN_HALF}' mass='{COIN_MASS}'"
     rows = []
     for integrator, h in [("Euler", 0.002), ("RK4", 0.002), ("Euler", 0.0005)][: 1 if quick else 3]:
         xml = (
@@ -279,7 +290,7 @@ def mujoco_rows(states0, quick):
             "<worldbody><geom type='plane' size='0 0 1' contype='0' conaffinity='1' "
             f"friction='{FRICTION} 0.005 0.0001'/>"
             + "".join(
-                f"<body><freejoint/><geom type='box' size='{HALF} {HALF} {HALF}' mass='{MASS}' "
+                f"<body><freejoint/><geom {geom} "
                 f"contype='1' conaffinity='0' friction='{FRICTION} 0.005 0.0001'/></body>"
                 for _ in range(n)
             )
@@ -303,8 +314,8 @@ def mujoco_rows(states0, quick):
         rest = float(np.mean(np.abs(np.asarray(data.qvel).reshape(n, 6)).max(-1) < 1e-2))
         rows.append(
             C.Row(
-                "B4",
-                f"MuJoCo C {integrator}, N dice in one scene: DIFFERENT MODEL (soft contact)",
+                f"B4 {shape}",
+                f"MuJoCo C {integrator}, N bodies in one scene: DIFFERENT MODEL (soft contact)",
                 "float64",
                 f"h {h:g}",
                 n,
@@ -320,39 +331,50 @@ def mujoco_rows(states0, quick):
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description="B4 die thrown onto the floor (impacts)")
-    p.add_argument("--n", type=int, default=64)
+    p = argparse.ArgumentParser(description="B4 die and coin thrown onto the floor (impacts)")
+    p.add_argument("--n", type=int, default=64, help="dice")
+    p.add_argument("--n-coins", type=int, default=None, help="coins (default n / 4; 0: none)")
     p.add_argument("--dtype", choices=["float64", "float32", "both"], default="both")
     p.add_argument("--out", default=None)
     p.add_argument("--quick", action="store_true")
     a = p.parse_args(argv)
     dtypes = ("float64", "float32") if a.dtype == "both" else (a.dtype,)
-    rows, items = run(a.n, dtypes, a.quick)
+    n_coins = a.n_coins if a.n_coins is not None else max(a.n // 4, 1)
     dev = C.device_name()
-    table = C.markdown_table(rows, dev)
-    details = detail_table(items, dev)
-    print(table)
-    print(details)
-    if a.out:
-        os.makedirs(a.out, exist_ok=True)
-        with open(os.path.join(a.out, "b4.md"), "w") as f:
-            f.write(
-                "## B4 die thrown onto the floor (impacts)\n\n"
-                + table
-                + "\n### B4 error parts and result codes\n\n"
-                + details
-            )
-        # the worst body sits near pi (a die on another face) at every tolerance: plot the median
-        C.plot_work_precision(
-            [
-                dataclasses.replace(r, error=d["median"])
-                for r, d in items
-                if not r.method.startswith("reference")
-            ],
-            f"B4 die with impacts, N={a.n}, {dev}",
-            os.path.join(a.out, "b4.png"),
-            ylabel="median body's error (worst body: see b4.md)",
+    text, rows = "", []
+    for shape, n in (("die", a.n), ("coin", n_coins)):
+        if n <= 0:
+            continue
+        shape_rows, items = run(n, dtypes, a.quick, shape)
+        rows += shape_rows
+        table = C.markdown_table(shape_rows, dev)
+        details = detail_table(items, dev)
+        print(table)
+        print(details)
+        png = "b4.png" if shape == "die" else f"b4_{shape}.png"
+        text += (
+            f"## B4 {shape} thrown onto the floor (impacts), N = {n}\n\n"
+            + table
+            + f"\n### B4 {shape}: error parts and result codes\n\n"
+            + details
+            + f"\n![B4 {shape}]({png})\n\n"
         )
+        if a.out:
+            os.makedirs(a.out, exist_ok=True)
+            # the worst body sits near pi (on another face) at every tolerance: plot the median
+            C.plot_work_precision(
+                [
+                    dataclasses.replace(r, error=d["median"])
+                    for r, d in items
+                    if not r.method.startswith("reference")
+                ],
+                f"B4 {shape} with impacts, N={n}, {dev}",
+                os.path.join(a.out, png),
+                ylabel="median body's error (worst body: see b4.md)",
+            )
+    if a.out:
+        with open(os.path.join(a.out, "b4.md"), "w") as f:
+            f.write(text)
     return rows
 
 

@@ -59,7 +59,8 @@ def main(argv=None):
         ["--periods", str(a.periods if not a.quick else 100), "--out", a.out]
         + (["--top-seconds", "20"] if a.quick else [])
     )
-    parts = [f"# jaxrb benchmark report\n\ndevice: `{C.device_name()}`, N = {a.n} (B4: {n4})\n"]
+    b4_sizes = f"B4: {n4} dice, {max(n4 // 4, 1)} coins"
+    parts = [f"# jaxrb benchmark report\n\ndevice: `{C.device_name()}`, N = {a.n} ({b4_sizes})\n"]
     for name in ("b1.md", "b2.md", "b3.md", "b4.md", "long_run.md"):
         path = os.path.join(a.out, name)
         if os.path.exists(path):
