@@ -60,7 +60,37 @@ def body_faces(scene):
     return _box_faces(np.sqrt(np.maximum(sq, 1e-12 * sq.max())) / 2)
 
 
-def animate(traj, scene, path=None, *, fps=20, max_frames=60, view="auto", trail=True, title=None):
+def _rotations(quat) -> np.ndarray:
+    """R(q) (T, 3, 3) of unit quaternions (T, 4), scalar first, body -> world."""
+    q = quat / np.linalg.norm(quat, axis=-1, keepdims=True)
+    e0, e = q[:, 0], q[:, 1:]
+    # R = (2 e0^2 - 1) I + 2 e e^T + 2 e0 skew(e)
+    skew = np.zeros((len(q), 3, 3))
+    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -e[:, 2], e[:, 1], -e[:, 0]
+    skew = skew - np.swapaxes(skew, 1, 2)
+    return (
+        (2 * e0**2 - 1)[:, None, None] * np.eye(3)
+        + 2 * e[:, :, None] * e[:, None, :]
+        + 2 * e0[:, None, None] * skew
+    )
+
+
+def world_limits(points, floor_z=None, margin=0.08, min_fraction=0.25):
+    """Fixed axis limits (3, 2) in m that hold `points` (N, 3, world) and the floor plane.
+
+    Each range is padded by `margin` of the largest range and widened to at least
+    `min_fraction` of it, so that a flat motion still gets a visible depth.
+    """
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    if floor_z is not None:
+        lo[2], hi[2] = min(lo[2], floor_z), max(hi[2], floor_z)
+    span = max(float(np.max(hi - lo)), 1e-9)
+    half = np.maximum(0.5 * (hi - lo), 0.5 * min_fraction * span) + margin * span
+    centre = 0.5 * (lo + hi)
+    return np.stack([centre - half, centre + half], axis=-1)
+
+
+def animate(traj, scene, path=None, *, fps=20, max_frames=60, view="world", trail=True, title=None):
     """Animate the body's motion in 3D.
 
     **Arguments:**
@@ -69,73 +99,65 @@ def animate(traj, scene, path=None, *, fps=20, max_frames=60, view="auto", trail
     - `path`: if given, save a GIF there (pillow writer).
     - `fps`: frames per second of the GIF; `max_frames`: the save times are subsampled to at
       most this many frames.
-    - `view`: "world" (fixed axes covering the whole trajectory), "follow" (axes centred on
-      the body, a few body sizes wide) or "auto" (follow when the body is small compared
-      with the distance it travels).
+    - `view`: "world" (a fixed camera: the same limits in every frame, holding the whole
+      motion of the body, the floor and a joint's fixed point, equal scales on the three
+      axes) or "follow" (axes centred on the body, a few body sizes wide; the floor may
+      leave the view).
     - `trail`: draw the path of the mass centre.
 
     **Returns:** the `matplotlib.animation.FuncAnimation`.
 
     World frame, z up; the body is drawn at R(q) x + pos, q scalar-first body -> world.
     """
+    if view not in ("world", "follow"):
+        raise ValueError(f"view must be 'world' or 'follow', got {view!r}")
     ts = np.asarray(traj.ts, float)
     pos = np.asarray(traj.states.pos, float)
-    quat = np.asarray(traj.states.quat, float)
-    quat = quat / np.linalg.norm(quat, axis=-1, keepdims=True)
-    e0, e = quat[:, 0], quat[:, 1:]
-    # R = (2 e0^2 - 1) I + 2 e e^T + 2 e0 skew(e)
-    skew = np.zeros((len(ts), 3, 3))
-    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -e[:, 2], e[:, 1], -e[:, 0]
-    skew = skew - np.swapaxes(skew, 1, 2)
-    R = (
-        (2 * e0**2 - 1)[:, None, None] * np.eye(3)
-        + 2 * e[:, :, None] * e[:, None, :]
-        + 2 * e0[:, None, None] * skew
-    )
+    R = _rotations(np.asarray(traj.states.quat, float))
     faces = body_faces(scene)
     size = max(float(np.max(np.abs(np.concatenate(faces)))), 1e-9)
-    extent = float(np.max(np.ptp(pos, axis=0)))
-    if view == "auto":
-        view = "follow" if extent > 12 * size else "world"
-    if view not in ("world", "follow"):
-        raise ValueError(f"view must be 'auto', 'world' or 'follow', got {view!r}")
     frames = np.unique(np.linspace(0, len(ts) - 1, min(max_frames, len(ts))).round().astype(int))
+    floor_z = float(scene.floor.height) if scene.floor is not None else None
+    anchor = None
+    if scene.joint is not None:
+        anchor = pos[0] + R[0] @ np.asarray(scene.joint.point, float)
+    corners = np.concatenate(faces)
+    points = np.concatenate([corners @ R[k].T + pos[k] for k in range(len(ts))])
+    limits = world_limits(points if anchor is None else np.vstack([points, anchor]), floor_z)
 
     fig = plt.figure(figsize=(5.5, 5.5))
     ax = fig.add_subplot(projection="3d")
+    ax.computed_zorder = False  # drawn in zorder: floor, body, trail, the joint's fixed point
     colors = ["#d9534f", "#5bc0de", "#5cb85c", "#f0ad4e", "#8e6fd8", "#eeeeee"]
-    poly = Poly3DCollection([], edgecolor="k", linewidths=0.5)
+    poly = Poly3DCollection([], edgecolor="k", linewidths=0.5, zorder=1)
     ax.add_collection3d(poly)
-    (trail_line,) = ax.plot([], [], [], "C0", lw=1)
-    half = 3 * size if view == "follow" else 0.5 * extent + 1.5 * size
-    centre_world = 0.5 * (pos.min(0) + pos.max(0))
-    floor_z = float(scene.floor.height) if scene.floor is not None else None
-    floor = Poly3DCollection([], facecolor="0.75", alpha=0.4, edgecolor="0.5")
+    (trail_line,) = ax.plot([], [], [], "C0", lw=1, zorder=2)
+    if anchor is not None:  # the joint's fixed point and the line from it to the mass centre
+        ax.plot(*([c] for c in anchor), "ko", ms=5, zorder=3)
+    (stem,) = ax.plot([], [], [], "k-", lw=1.2, zorder=3)
+    floor = Poly3DCollection([], facecolor="0.75", alpha=0.4, edgecolor="0.5", zorder=0)
     if floor_z is not None:
         ax.add_collection3d(floor)
+    for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+        axis.set_major_locator(plt.MaxNLocator(4))
     time_text = ax.text2D(0.02, 0.95, "", transform=ax.transAxes)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_zlabel("z (m)")
-    ax.set_box_aspect((1, 1, 1))
     if title:
         ax.set_title(title)
 
-    def set_view(centre):
-        for setter, c in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), centre, strict=True):
-            setter(c - half, c + half)
+    def set_view(lims):
+        for setter, (lo, hi) in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), lims, strict=True):
+            setter(lo, hi)
+        ax.set_box_aspect(tuple(lims[:, 1] - lims[:, 0]))
         if floor_z is not None:
-            x0, x1, y0, y1 = centre[0] - half, centre[0] + half, centre[1] - half, centre[1] + half
-            floor.set_verts(
-                [
-                    np.array(
-                        [[x0, y0, floor_z], [x1, y0, floor_z], [x1, y1, floor_z], [x0, y1, floor_z]]
-                    )
-                ]
-            )
+            (x0, x1), (y0, y1) = lims[0], lims[1]
+            corners = [[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
+            floor.set_verts([np.array([[x, y, floor_z] for x, y in corners])])
 
-    if view == "world":
-        set_view(centre_world)
+    half = 3 * size
+    set_view(limits)
 
     def update(k):
         polys = [f @ R[k].T + pos[k] for f in faces]
@@ -146,12 +168,17 @@ def animate(traj, scene, path=None, *, fps=20, max_frames=60, view="auto", trail
             if view == "follow":  # 3D lines are not clipped: hide the part outside the view
                 path[np.any(np.abs(path - pos[k]) > half, axis=-1)] = np.nan
             trail_line.set_data_3d(path[:, 0], path[:, 1], path[:, 2])
+        if anchor is not None:
+            stem.set_data_3d(*np.stack([anchor, pos[k]], axis=-1))
         if view == "follow":
-            set_view(pos[k])
+            set_view(pos[k][:, None] + np.array([-half, half]))
         time_text.set_text(f"t = {ts[k]:.3f} s")
-        return poly, trail_line, time_text
+        return poly, trail_line, stem, time_text
 
     anim = animation.FuncAnimation(fig, update, frames=frames, interval=1000 / fps, blit=False)
     if path is not None:
-        anim.save(path, writer=animation.PillowWriter(fps=fps))
+        # mplot3d pads polygons with fewer vertices (a cylinder's sides next to its caps) with
+        # NaN, which numpy reports as an overflow when projecting them: not an error here
+        with np.errstate(over="ignore", invalid="ignore"):
+            anim.save(path, writer=animation.PillowWriter(fps=fps))
     return anim

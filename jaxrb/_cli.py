@@ -1,13 +1,15 @@
 """The `jaxrb` command line: run a scene file, sweep a parameter grid, fit, benchmark.
 
-    jaxrb run [SCENE.toml]            simulate, write trajectory (npz, CSV), plots, summary
-    jaxrb sweep [SCENE.toml] -p PATH=SPEC ...   a batch over a parameter grid -> results CSV
+    jaxrb run [SCENE]                 simulate, write trajectory (npz, CSV), plots, summary
+    jaxrb run --list                  the example scenes shipped with jaxrb
+    jaxrb sweep [SCENE] -p PATH=SPEC ...   a batch over a parameter grid -> results CSV
     jaxrb fit KIND DATA ...           fit inertia, restitution or drag to measured motion
     jaxrb bench [ARGS...]             the benchmark report (source checkout only)
 
 This file holds `run`, `sweep` and `bench`, the argument parser and `main` (the console script
 entry point). `jaxrb fit` lives in `_cli_fit.py`; the helpers both use in `_cli_common.py`.
-With no scene file the built-in default scene is used (a die thrown with spin onto a table).
+SCENE is a scene file (TOML) or the name of a shipped example (`_scene_examples.py`); with
+none, the default scene is used (the die: thrown with spin onto a table).
 Outputs go to `jaxrb-output/` (change with `-o`); existing files are never overwritten unless
 `--force` is given. User errors exit with status 2, a failed simulation or a fit that does not
 converge with 1. The command line computes in float64 (it enables `jax_enable_x64`).
@@ -34,15 +36,28 @@ from ._cli_common import (
 from ._cli_fit import add_fit_parser
 
 _EPILOG_RUN = """\
+examples (SCENE may name one; an existing file of that name takes precedence):
+  die, coin, pendulum, heavy_top     list them: jaxrb run --list; print one: jaxrb run NAME --show
+
 outputs (in OUTPUT):
-  trajectory.npz     arrays t, pos, quat, vel, omega, energy, impact_times, impact_energy_lost
-  trajectory.csv     one row per save time: t, x, y, z, e0..e3, vx, vy, vz, wx, wy, wz, energy
-  height_attitude.png, angular_velocity.png, energy.png
+  trajectory.npz     arrays t, pos, quat, vel, omega, energy, impact_times, impact_energy_lost;
+                     with a joint also reaction (T, 3), reaction_magnitude, and for a hinge
+                     joint_angle, reaction_normal, reaction_tangential, reaction_axial
+  trajectory.csv     one row per save time: t, x, y, z, e0..e3, vx, vy, vz, wx, wy, wz, energy;
+                     with a joint also [theta,] Ox, Oy, Oz, [On, Ot, Oa,] Omag
+  scene.toml         the scene that was run (the file, with t_end changed by --t-end)
+  height_attitude.png, angular_velocity.png, energy.png (energy, physical losses, and the
+                     solver's drift on its own axes), reaction.png (a scene with a joint)
+  animation.gif      with --animate (fixed camera, the floor in view)
   summary.txt        the printed summary table
-  animation.gif      with --animate
-  scene.toml         a copy of the scene file that was run
 
 frames: pos/vel world frame (z up); omega body frame; quat scalar first, body -> world.
+joint reaction O (N): the force the joint exerts on the body, world frame; for a hinge, theta
+(rad) is its angle about the axis (0 at the start), On its component along the line from the
+mass centre to the axis (positive towards the axis), Ot across it (positive against
+increasing theta), Oa along the axis. A pendulum released from rest with its mass centre
+level with a horizontal axis gets the closed forms On = m g (1 + 2 rbar^2/k_O^2) sin(theta),
+Ot = m g (1 - rbar^2/k_O^2) cos(theta) in reaction.png (example: pendulum).
 the scene file format is documented in the default scene: jaxrb run --show-default
 """
 
@@ -62,11 +77,32 @@ final position and speed, |omega|, energies, max height, impacts, solver steps.
 # helpers
 
 
-def _load(scene_arg):
-    from ._scene_file import default_scene_path, load_scene
+def _scene_path(scene_arg) -> Path:
+    """The scene file a SCENE argument names (a file, or a shipped example's name)."""
+    from ._scene_examples import EXAMPLES, scene_path
 
-    path = default_scene_path() if scene_arg is None else Path(scene_arg)
+    path = scene_path(scene_arg)
+    if not path.exists():
+        raise CLIError(
+            f"{path}: no such scene file, nor a shipped example ({', '.join(EXAMPLES)}; "
+            "see jaxrb run --list)"
+        )
+    return path
+
+
+def _load(scene_arg):
+    from ._scene_file import load_scene
+
+    path = _scene_path(scene_arg)
     return load_scene(path), path
+
+
+def _list_examples() -> int:
+    from ._scene_examples import example_titles
+
+    print(_table(example_titles(), header=("name", "title"), right=False))
+    print("\nrun one: jaxrb run NAME; print its scene file: jaxrb run NAME --show")
+    return 0
 
 
 def _simulate(spec, progress=False, throw=True):
@@ -138,59 +174,24 @@ def _result_name(result) -> str:
 # run
 
 
-def _write_trajectory(traj, scene, outdir: Path):
-    import jaxrb
+def _run_outputs(scene, args) -> list[str]:
+    """The files `jaxrb run` writes, in order."""
+    names = ["trajectory.npz", "trajectory.csv", "scene.toml"]
+    if not args.no_plots:
+        from .plotting import run_plot_names
 
-    from .plotting import impact_summary as impact_records
+        names += run_plot_names(scene)
+    if args.animate:
+        names.append("animation.gif")
+    return names + ["summary.txt"]
 
-    s = traj.states
-    arrays = {
-        "t": np.asarray(traj.ts, float),
-        "pos": np.asarray(s.pos, float),
-        "quat": np.asarray(s.quat, float),
-        "vel": np.asarray(s.vel, float),
-        "omega": np.asarray(s.omega, float),
-        "energy": np.asarray(jaxrb.energy(scene, s), float),
-    }
-    imp = impact_records(traj, scene)
-    arrays["impact_times"] = imp["times"]
-    arrays["impact_energy_lost"] = imp["energy_lost"]
-    np.savez(outdir / "trajectory.npz", **arrays)
-    header = [
-        "t",
-        "x",
-        "y",
-        "z",
-        "e0",
-        "e1",
-        "e2",
-        "e3",
-        "vx",
-        "vy",
-        "vz",
-        "wx",
-        "wy",
-        "wz",
-        "energy",
-    ]
-    table = np.column_stack(
-        [
-            arrays["t"],
-            arrays["pos"],
-            arrays["quat"],
-            arrays["vel"],
-            arrays["omega"],
-            arrays["energy"],
-        ]
-    )
-    with open(outdir / "trajectory.csv", "w", newline="") as f:
-        f.write(
-            "# jaxrb trajectory: pos/vel world frame (m, m/s); quat scalar first body->world; "
-            "omega body frame (rad/s); energy (J)\n"
-        )
-        w = csv.writer(f)
-        w.writerow(header)
-        w.writerows([[f"{v:.12g}" for v in row] for row in table])
+
+def _scene_text(path: Path, t_end) -> str:
+    """The scene file's text as run: with `[simulation].t_end` set to `--t-end` if given."""
+    from ._scene_file import with_t_end
+
+    text = path.read_text(encoding="utf-8")
+    return text if t_end is None else with_t_end(text, t_end, str(path))
 
 
 def cmd_run(args) -> int:
@@ -201,14 +202,10 @@ def cmd_run(args) -> int:
                 f"--t-end must be greater than the start time {spec.ts[0]}, got {args.t_end}"
             )
         spec.ts = np.linspace(spec.ts[0], args.t_end, spec.ts.size)
+    scene_text = _scene_text(path, args.t_end)
     outdir = Path(args.output)
-    names = ["trajectory.npz", "trajectory.csv", "summary.txt", "scene.toml"]
-    if not args.no_plots:
-        names += ["height_attitude.png", "angular_velocity.png", "energy.png"]
-    if args.animate:
-        names.append("animation.gif")
-    _outputs_free(outdir, names, args.force)
-    label = "built-in default scene" if args.scene is None else str(path)
+    _outputs_free(outdir, _run_outputs(spec.scene, args), args.force)
+    label = "built-in default scene" if args.scene is None else str(args.scene)
     say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
     say(
         f"jaxrb run: {spec.title or label} ({label}); "
@@ -226,9 +223,12 @@ def cmd_run(args) -> int:
             file=sys.stderr,
         )
         return 1
-    _write_trajectory(traj, spec.scene, outdir)
-    (outdir / "scene.toml").write_text(Path(path).read_text(encoding="utf-8"), encoding="utf-8")
-    written = ["trajectory.npz", "trajectory.csv"]
+    from ._trajectory_files import file_arrays, write_trajectory
+
+    arrays = file_arrays(traj, spec.scene)
+    written = write_trajectory(arrays, outdir)
+    (outdir / "scene.toml").write_text(scene_text, encoding="utf-8")
+    written.append("scene.toml")
     if not args.no_plots:
         say("writing plots ...")
         from . import plotting
@@ -241,18 +241,27 @@ def cmd_run(args) -> int:
 
         plotting.animate(traj, spec.scene, outdir / "animation.gif", title=spec.title or None)
         written.append("animation.gif")
+    rows = _run_summary(spec, label, traj, m, arrays, wall)
+    rows.append(("output", f"{outdir}/ ({', '.join([*written, 'summary.txt'])})"))
+    text = _table(rows, header=("quantity", "value"), right=False)
+    (outdir / "summary.txt").write_text(text + "\n", encoding="utf-8")
+    print(text)
+    return 0
+
+
+def _run_summary(spec, label, traj, m, arrays, wall) -> list[tuple[str, str]]:
+    """The rows of `jaxrb run`'s summary table (without the output list)."""
     body = spec.scene.body
     s = traj.states
-    rows = [
+    floor = spec.scene.floor
+    return [
         ("scene", spec.title or label),
         ("body mass (kg)", _fmt(body.mass)),
         ("shape", type(body.shape).__name__ if body.shape is not None else "none"),
         ("forces", ", ".join(type(f).__name__ for f in spec.scene.forces) or "none"),
         (
             "floor (restitution, friction)",
-            "none"
-            if spec.scene.floor is None
-            else f"{float(spec.scene.floor.restitution):g}, {float(spec.scene.floor.friction):g}",
+            "none" if floor is None else f"{float(floor.restitution):g}, {float(floor.friction):g}",
         ),
         ("joint", type(spec.scene.joint).__name__ if spec.scene.joint is not None else "none"),
         ("time span (s)", f"{spec.ts[0]:g} .. {spec.ts[-1]:g} ({spec.ts.size} saves)"),
@@ -264,8 +273,10 @@ def cmd_run(args) -> int:
         ("solver steps", m["steps"]),
         ("impacts", m["impacts"]),
         ("energy start / end (J)", f"{_fmt(m['energy_start'])} / {_fmt(m['energy_end'])}"),
-        ("energy lost: total (J)", _fmt(m["energy_lost"])),
+        ("energy lost: total, E(0) - E(end) (J)", _fmt(m["energy_lost"])),
         ("energy lost: at impacts (J)", _fmt(m["energy_lost_impacts"])),
+        *_drift_rows(traj, spec.scene),
+        *_reaction_rows(spec, arrays),
         ("max height of mass centre (m)", _fmt(m["max_height"])),
         ("final position (m, world)", _fmt(np.asarray(s.pos)[-1], 5)),
         ("final velocity (m/s, world)", _fmt(np.asarray(s.vel)[-1], 5)),
@@ -273,12 +284,39 @@ def cmd_run(args) -> int:
         ("final quaternion (body->world)", _fmt(np.asarray(s.quat)[-1], 5)),
         ("max | |q| - 1 | in solver", _fmt(m["quat_norm_drift"], 3)),
         ("wall time incl. compile (s)", f"{wall:.2f}"),
-        ("output", f"{outdir}/ ({', '.join(written)})"),
     ]
-    text = _table(rows, header=("quantity", "value"), right=False)
-    (outdir / "summary.txt").write_text(text + "\n", encoding="utf-8")
-    print(text)
-    return 0
+
+
+def _drift_rows(traj, scene) -> list[tuple[str, str]]:
+    """The solver's energy drift, max |E(t) - E(0) - W(t)| (J), where it is separable."""
+    from ._energy_budget import energy_budget
+
+    budget = energy_budget(traj, scene)
+    if budget["drift"] is None:
+        return [("solver energy drift (J)", "not separated (sliding friction with the floor)")]
+    rows = [("solver energy drift, max |E - E(0) - W| (J)", _fmt(np.max(np.abs(budget["drift"]))))]
+    if budget["nonpotential"]:
+        rows.insert(0, ("energy removed by drag etc., -W(end) (J)", _fmt(-budget["work"][-1])))
+    return rows
+
+
+def _reaction_rows(spec, arrays) -> list[tuple[str, str]]:
+    """The joint reaction's largest magnitude and, for a released pendulum, its largest
+    difference from the closed form (N)."""
+    from ._reaction import released_pendulum
+
+    if "reaction" not in arrays:
+        return []
+    rows = [("joint reaction: max |O| (N)", _fmt(np.max(arrays["reaction_magnitude"])))]
+    release = released_pendulum(spec.scene, spec.state0)
+    if release is not None:
+        on, ot = release.reaction(arrays["joint_angle"])
+        error = max(
+            np.max(np.abs(arrays["reaction_normal"] - on)),
+            np.max(np.abs(arrays["reaction_tangential"] - ot)),
+        )
+        rows.append(("joint reaction: max |O_n, O_t - closed form| (N)", _fmt(error, 3)))
+    return rows
 
 
 # ---------------------------------------------------------------------------------------------
@@ -439,8 +477,9 @@ def _add_common(p, output=True):
         "scene",
         nargs="?",
         default=None,
-        metavar="SCENE.toml",
-        help="scene file (TOML); default: the built-in die-on-a-table scene",
+        metavar="SCENE",
+        help="a scene file (SCENE.toml) or the name of a shipped example (die, coin, pendulum, "
+        "heavy_top; see jaxrb run --list); default: die, thrown onto a table",
     )
     if output:
         add_output_options(p)
@@ -481,6 +520,14 @@ def build_parser() -> argparse.ArgumentParser:
         "--animate", action="store_true", help="also write a 3D animation (animation.gif)"
     )
     run.add_argument("-q", "--quiet", action="store_true", help="print only the summary table")
+    run.add_argument(
+        "--list", action="store_true", help="list the example scenes shipped with jaxrb and exit"
+    )
+    run.add_argument(
+        "--show",
+        action="store_true",
+        help="print the scene file (SCENE, default the die) and exit: copy an example to edit it",
+    )
     run.add_argument(
         "--show-default",
         action="store_true",
@@ -536,10 +583,15 @@ def main(argv=None) -> int:
     if args.command is None:
         parser.print_help()
         return 2
-    if args.command == "run" and args.show_default:
-        from ._scene_file import default_scene_path
-
-        print(default_scene_path().read_text(encoding="utf-8"), end="")
+    if args.command == "run" and args.list:
+        return _list_examples()
+    if args.command == "run" and (args.show or args.show_default):
+        try:
+            path = _scene_path(None if args.show_default else args.scene)
+        except CLIError as e:
+            print(f"jaxrb run: error: {e}", file=sys.stderr)
+            return 2
+        print(path.read_text(encoding="utf-8"), end="")
         return 0
     import jax
 

@@ -20,7 +20,10 @@ The format is documented, field by field, in the annotated example shipped with 
   "quadratic_drag" (`coefficient`, or `rho`, `drag_coefficient`, `area`), "damping_moment"
   (`linear`, `quadratic`), "wrench" (`force`, `torque`, `point`, `frame`).
 - `[floor]`: `restitution` in [0, 1], `friction` >= 0, `height` (m).
-- `[joint]`: `type` = "pivot" or "hinge", `point` (body frame, m), `axis` (hinge).
+- `[joint]`: `type` = "pivot" or "hinge", `point` (body frame, m), `axis` (hinge). A joint
+  fixes part of the initial motion: `[initial].vel`, if given, must equal the velocity the
+  joint gives the mass centre, and a hinge's `omega` must lie along its axis; anything else
+  is an error naming the field.
 - `[simulation]`: `t_end` (s, required), `t_start`, `num_saves`, `rtol`, `atol`,
   `max_steps`, `solver` ("tsit5", "dopri5", "dopri8").
 """
@@ -29,13 +32,15 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
-import importlib.resources
 import math
+import re
 import tomllib
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from ._scene_examples import example_path
 
 __all__ = [
     "SceneFileError",
@@ -44,6 +49,7 @@ __all__ = [
     "load_scene",
     "loads_scene",
     "parse_scene",
+    "with_t_end",
 ]
 
 
@@ -79,7 +85,7 @@ class SceneSpec:
 
 def default_scene_path() -> Path:
     """Path of the annotated default scene shipped with jaxrb (a die thrown onto a table)."""
-    return Path(str(importlib.resources.files("jaxrb") / "scenes" / "default.toml"))
+    return example_path("die")
 
 
 def load_scene(path) -> SceneSpec:
@@ -309,7 +315,7 @@ def _initial(root: _Table):
         default=None,
     )
     if init is None:
-        return jaxrb.make_state()
+        return jaxrb.make_state(), None
     given = [k for k in ("quat", "axis", "euler_deg") if init.has(k)]
     if len(given) > 1:
         init.fail(given[1], f"give the attitude once: `{given[0]}` is already set")
@@ -333,12 +339,50 @@ def _initial(root: _Table):
         for k in ("angle_deg", "sequence"):
             if init.has(k):
                 init.fail(k, "given without `axis` / `euler_deg`")
-    return jaxrb.make_state(
+    state = jaxrb.make_state(
         pos=init.vector("pos", default=(0.0, 0.0, 0.0)),
         quat=quat,
         vel=init.vector("vel", default=(0.0, 0.0, 0.0)),
         omega=init.vector("omega", default=(0.0, 0.0, 0.0)),
     )
+    return state, init
+
+
+def _joint_motion(init: _Table | None, joint, state0):
+    """Refuse initial motion the joint cannot have: a hinge's `omega` off its axis, or a `vel`
+    other than the one the joint gives the mass centre, R (omega x (C - O))."""
+    import jax.numpy as jnp
+
+    import jaxrb
+
+    if joint is None or init is None:
+        return
+    name = f"the [joint] ({'hinge' if isinstance(joint, jaxrb.Hinge) else 'pivot'})"
+    omega = np.asarray(state0.omega, dtype=float)
+    if isinstance(joint, jaxrb.Hinge):
+        axis = np.asarray(joint.axis, dtype=float)
+        off = omega - (omega @ axis) * axis
+        if np.linalg.norm(off) > 1e-9 * np.linalg.norm(omega):
+            init.fail(
+                "omega",
+                f"{name} turns the body only about its axis {_fmt_vec(axis)} (body frame); "
+                f"omega = {_fmt_vec(omega)} rad/s has the part {_fmt_vec(off)} off that axis",
+            )
+    if init.has("vel"):
+        r_body = -np.asarray(joint.point, dtype=float)
+        v_body = jnp.asarray(np.cross(omega, r_body), dtype=state0.quat.dtype)
+        implied = np.asarray(jaxrb.quat_rotate(state0.quat, v_body), dtype=float)
+        vel = np.asarray(state0.vel, dtype=float)
+        if np.linalg.norm(vel - implied) > 1e-9 * max(np.linalg.norm(implied), 1.0):
+            init.fail(
+                "vel",
+                f"{name} sets the mass centre's velocity from omega, R (omega x (C - O)) = "
+                f"{_fmt_vec(implied)} m/s; got {_fmt_vec(vel)} m/s: leave `vel` out",
+            )
+
+
+def _fmt_vec(v) -> str:
+    return "[" + ", ".join(f"{float(x):.6g}" for x in v) + "]"
 
 
 _FORCES = {
@@ -473,10 +517,48 @@ def parse_scene(data: dict, source: str = "<scene>") -> SceneSpec:
         root.fail("joint", "a scene may have a [floor] or a [joint], not both")
     if floor is not None and body.shape is None:
         root.fail("floor", "a scene with a floor needs a [body.shape] to find the contact point")
-    state0 = _initial(root)
+    state0, init = _initial(root)
+    _joint_motion(init, joint, state0)
     ts, options = _simulation(root)
     scene = jaxrb.Scene(body, forces=forces, floor=floor, joint=joint)
     return SceneSpec(scene, state0, ts, options, title, description, data, source)
+
+
+_HEADER = re.compile(r"^\s*\[\[?\s*([^\[\]#]+?)\s*\]\]?\s*(#.*)?$")
+_T_END = re.compile(r"^(\s*t_end\s*=\s*)([^#]*?)\s*(#.*)?$")
+
+
+def with_t_end(text: str, t_end: float, source: str = "<scene>") -> str:
+    """The scene file's text with `[simulation].t_end` set to `t_end` (s), comments kept.
+
+    `jaxrb run --t-end` saves this as the scene that was run. Raises `SceneFileError` when
+    the field is not written as a `t_end = ...` line of the `[simulation]` table.
+    """
+    lines = text.splitlines()
+    table = None
+    for i, line in enumerate(lines):
+        header = _HEADER.match(line)
+        if header:
+            table = header.group(1)
+            continue
+        match = _T_END.match(line)
+        if table == "simulation" and match:
+            was = match.group(2)
+            lines[i] = f"{match.group(1)}{float(t_end)!r}  # set by --t-end (the file had {was})"
+            break
+    new = "\n".join(lines) + "\n"
+    expected = tomllib.loads(text)
+    expected["simulation"]["t_end"] = float(t_end)
+    try:
+        same = tomllib.loads(new) == expected
+    except tomllib.TOMLDecodeError:
+        same = False
+    if not same:
+        raise SceneFileError(
+            f"{source}: [simulation].t_end: --t-end cannot rewrite this field in the saved copy "
+            "of the scene; write it as a line `t_end = ...` under [simulation], or edit the file"
+        )
+    return new
 
 
 def make_solver(name: str):

@@ -25,8 +25,10 @@ __all__ = [
     "plot_energy",
     "plot_height_attitude",
     "plot_herpolhode",
+    "plot_joint_reaction",
     "plot_polhode",
     "plot_polhode_herpolhode",
+    "run_plot_names",
     "save_run_plots",
     "trajectory_arrays",
 ]
@@ -147,8 +149,15 @@ def trajectory_arrays(traj, scene) -> dict:
 def _finish(fig, path):
     fig.tight_layout()
     if path is not None:
-        fig.savefig(path, dpi=110)
+        fig.savefig(path, dpi=110, bbox_inches="tight")
     return fig
+
+
+def _legend(ax, ncol=1):
+    """A legend outside the axes, to their right, so that it never covers data."""
+    ax.legend(
+        loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, fontsize="small", ncol=ncol
+    )
 
 
 def _mark_impacts(ax, times):
@@ -172,7 +181,7 @@ def plot_height_attitude(traj, scene, path=None, title=None):
     """
     a = trajectory_arrays(traj, scene)
     imp = impact_summary(traj, scene)
-    fig, (ax1, ax2, ax3) = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
+    fig, (ax1, ax2, ax3) = plt.subplots(3, 1, figsize=(10, 8), sharex=True)
     ax1.plot(a["t"], a["pos"][:, 2], label="mass centre z")
     if scene.body.shape is not None:
         ax1.plot(a["t"], a["lowest_z"], label="lowest point z", lw=1)
@@ -189,7 +198,7 @@ def plot_height_attitude(traj, scene, path=None, title=None):
     ax3.set_xlabel("time t (s)")
     for ax in (ax1, ax2, ax3):
         _mark_impacts(ax, imp["times"])
-        ax.legend(loc="upper right", fontsize="small", ncol=2)
+        _legend(ax)
         ax.grid(alpha=0.3)
     if title:
         ax1.set_title(title)
@@ -200,7 +209,7 @@ def plot_angular_velocity(traj, scene, path=None, title=None):
     """Angular velocity (rad/s): body-frame components and |omega|, and world-frame components."""
     a = trajectory_arrays(traj, scene)
     imp = impact_summary(traj, scene)
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
     for k, name in enumerate(("xi", "eta", "zeta")):
         ax1.plot(a["t"], a["omega"][:, k], label=f"omega_{name} (body {k + 1})")
     ax1.plot(a["t"], np.linalg.norm(a["omega"], axis=-1), "k--", lw=1, label="|omega|")
@@ -211,7 +220,7 @@ def plot_angular_velocity(traj, scene, path=None, title=None):
     ax2.set_xlabel("time t (s)")
     for ax in (ax1, ax2):
         _mark_impacts(ax, imp["times"])
-        ax.legend(loc="best", fontsize="small")
+        _legend(ax)
         ax.grid(alpha=0.3)
     if title:
         ax1.set_title(title)
@@ -219,53 +228,161 @@ def plot_angular_velocity(traj, scene, path=None, title=None):
 
 
 def plot_energy(traj, scene, path=None, title=None):
-    """Energy over time (total, kinetic parts, potential; J) and the energy lost per impact.
+    """Energy over time (J), what physics took out, and the solver's drift, each on its own axes.
 
-    Without impacts the lower panel shows the energy dissipated so far, E(0) - E(t).
+    Panels: total, kinetic (translation, rotation) and potential energy; the physical losses:
+    the energy lost at each impact (a scene with a floor) or the energy removed by the forces
+    without a potential (drag, damping, wrenches), -W(t); and, without a floor, the solver's
+    drift E(t) - E(0) - W(t), which physics says is zero (`jaxrb._energy_budget`). With a floor
+    the drift is not separated: the work of sliding friction is not recorded.
     """
+    from ._energy_budget import energy_budget
+
     a = trajectory_arrays(traj, scene)
     imp = impact_summary(traj, scene)
-    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(8, 6))
-    ax1.plot(a["t"], a["energy"], "k", label="total E")
-    ax1.plot(a["t"], a["kinetic_translation"], label="kinetic, translation")
-    ax1.plot(a["t"], a["kinetic_rotation"], label="kinetic, rotation")
-    ax1.plot(a["t"], a["potential"], label="potential")
-    _mark_impacts(ax1, imp["times"])
-    ax1.set_xlabel("time t (s)")
-    ax1.set_ylabel("energy (J)")
-    ax1.legend(loc="best", fontsize="small")
-    ax1.grid(alpha=0.3)
+    budget = energy_budget(traj, scene)
+    panels = [_energy_parts]
+    if scene.floor is not None:
+        panels.append(_impact_losses)
+    elif budget["nonpotential"]:
+        panels.append(_work_removed)
+    if budget["drift"] is not None:
+        panels.append(_solver_drift)
+    fig, axes = plt.subplots(len(panels), 1, figsize=(10, 1.0 + 2.6 * len(panels)))
+    for ax, panel in zip(np.atleast_1d(axes), panels, strict=True):
+        panel(ax, a, imp, budget)
+        ax.grid(alpha=0.3)
+    if title:
+        np.atleast_1d(axes)[0].set_title(title)
+    return _finish(fig, path)
+
+
+def _energy_parts(ax, a, imp, budget):
+    ax.plot(a["t"], a["energy"], "k", label="total E")
+    ax.plot(a["t"], a["kinetic_translation"], label="kinetic, translation")
+    ax.plot(a["t"], a["kinetic_rotation"], label="kinetic, rotation")
+    ax.plot(a["t"], a["potential"], label="potential")
+    _mark_impacts(ax, imp["times"])
+    ax.set_xlabel("time t (s)")
+    ax.set_ylabel("energy (J)")
+    _legend(ax)
+
+
+def _impact_losses(ax, a, imp, budget):
     if imp["times"].size:
         n = np.arange(1, imp["times"].size + 1)
-        ax2.bar(n, imp["energy_lost"], color="C3")
-        ax2.set_xlabel("impact number")
-        ax2.set_ylabel("energy lost at impact (J)")
-        ax2.set_xticks(n if n.size <= 20 else n[:: max(1, n.size // 10)])
+        ax.bar(n, imp["energy_lost"], color="C3")
+        ax.set_xticks(n if n.size <= 20 else n[:: max(1, n.size // 10)])
     else:
-        ax2.plot(a["t"], a["energy"][0] - a["energy"], "C3")
-        ax2.set_xlabel("time t (s)")
-        ax2.set_ylabel("energy dissipated E(0) - E(t) (J)")
-        ax2.text(0.02, 0.9, "no impacts", transform=ax2.transAxes, fontsize="small")
-    ax2.grid(alpha=0.3)
+        ax.text(0.02, 0.85, "no impacts", transform=ax.transAxes, fontsize="small")
+    ax.set_xlabel("impact number")
+    ax.set_ylabel("lost at impact (J)")
+    ax.set_title(
+        "energy lost at each impact (sliding friction and solver drift are not separated)",
+        fontsize="small",
+    )
+
+
+def _work_removed(ax, a, imp, budget):
+    names = ", ".join(budget["nonpotential"])
+    ax.plot(a["t"], -budget["work"], "C3", label=f"-W(t): {names}")
+    ax.set_xlabel("time t (s)")
+    ax.set_ylabel("energy removed (J)")
+    ax.set_title("physical: work of the forces without a potential", fontsize="small")
+    _legend(ax)
+
+
+def _solver_drift(ax, a, imp, budget):
+    label = "E(t) - E(0) - W(t)" if budget["nonpotential"] else "E(t) - E(0)"
+    ax.plot(a["t"], budget["drift"], "C7", label=label)
+    ax.axhline(0.0, color="k", lw=0.6)
+    ax.set_xlabel("time t (s)")
+    ax.set_ylabel("solver drift (J)")
+    ax.set_title("numerical: the solver's energy drift (physics: zero)", fontsize="small")
+    _legend(ax)
+
+
+def plot_joint_reaction(traj, scene, path=None, title=None):
+    """The joint reaction O (N), the force the joint exerts on the body (`jaxrb._reaction`).
+
+    Hinge: O_n (along the line from the mass centre to the axis, positive towards the axis),
+    O_t (across it, positive against increasing angle) and |O| against the hinge angle theta
+    (deg), over their closed forms when the body was released from rest with its mass centre
+    level with a horizontal axis (docs/theory.md, section 6); then the world components and
+    the axial one against theta. Pivot: the world components and |O| against time.
+    """
+    import jax
+
+    import jaxrb
+
+    from ._reaction import reaction_arrays, released_pendulum
+
+    r = reaction_arrays(traj, scene)
+    if not isinstance(scene.joint, jaxrb.Hinge):
+        fig, ax = plt.subplots(figsize=(10, 4))
+        _reaction_world(ax, np.asarray(traj.ts, float), r)
+        ax.set_xlabel("time t (s)")
+        axes = [ax]
+    else:
+        fig, axes = plt.subplots(2, 1, figsize=(10, 7), sharex=True)
+        release = released_pendulum(scene, jax.tree.map(lambda x: x[0], traj.states))
+        _reaction_hinge(axes[0], r, release)
+        theta = np.degrees(r["joint_angle"])
+        _reaction_world(axes[1], theta, r)
+        axes[1].plot(theta, r["reaction_axial"], ":", label="O_a (along the axis)")
+        _legend(axes[1])
+        axes[1].set_xlabel("hinge angle theta (deg, about the axis, 0 at the start)")
     if title:
-        ax1.set_title(title)
+        axes[0].set_title(title)
     return _finish(fig, path)
+
+
+def _reaction_world(ax, x, r):
+    for k, name in enumerate("xyz"):
+        ax.plot(x, r["reaction"][:, k], label=f"O_{name} (world)")
+    ax.plot(x, r["reaction_magnitude"], "k--", lw=1, label="|O|")
+    ax.set_ylabel("joint reaction (N)")
+    ax.grid(alpha=0.3)
+    _legend(ax)
+
+
+def _reaction_hinge(ax, r, release):
+    theta = np.degrees(r["joint_angle"])
+    ax.plot(theta, r["reaction_normal"], "C0", label="O_n (towards the axis)")
+    ax.plot(theta, r["reaction_tangential"], "C1", label="O_t (against increasing theta)")
+    ax.plot(theta, r["reaction_magnitude"], "C2", label="|O|")
+    if release is not None:
+        on, ot = release.reaction(r["joint_angle"])
+        ax.plot(theta, on, "k--", lw=1, label="closed form m g (1 + 2 rbar^2/k_O^2) sin(theta)")
+        ax.plot(theta, ot, "k:", lw=1.2, label="closed form m g (1 - rbar^2/k_O^2) cos(theta)")
+    ax.set_ylabel("bearing force (N)")
+    ax.grid(alpha=0.3)
+    _legend(ax)
+
+
+def run_plot_names(scene) -> list[str]:
+    """The PNG files `save_run_plots` writes for `scene`."""
+    names = ["height_attitude.png", "angular_velocity.png", "energy.png"]
+    return names + (["reaction.png"] if scene.joint is not None else [])
 
 
 def save_run_plots(traj, scene, outdir, title=None) -> list[Path]:
     """Write the standard PNGs of `jaxrb run` into `outdir`; returns their paths.
 
-    Files: `height_attitude.png`, `angular_velocity.png`, `energy.png`.
+    Files (`run_plot_names`): `height_attitude.png`, `angular_velocity.png`, `energy.png`,
+    and for a scene with a joint `reaction.png`.
     """
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
+    plots = {
+        "height_attitude.png": plot_height_attitude,
+        "angular_velocity.png": plot_angular_velocity,
+        "energy.png": plot_energy,
+        "reaction.png": plot_joint_reaction,
+    }
     paths = []
-    for name, fn in (
-        ("height_attitude.png", plot_height_attitude),
-        ("angular_velocity.png", plot_angular_velocity),
-        ("energy.png", plot_energy),
-    ):
-        fig = fn(traj, scene, path=outdir / name, title=title)
+    for name in run_plot_names(scene):
+        fig = plots[name](traj, scene, path=outdir / name, title=title)
         plt.close(fig)
         paths.append(outdir / name)
     return paths

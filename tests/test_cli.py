@@ -1,13 +1,18 @@
 """The `jaxrb` command line, called in-process through `main([...])` (one subprocess test)."""
 
 import csv
+import re
 import subprocess
 import sys
+import tomllib
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+import jaxrb.analytic
 from jaxrb._cli import main
+from jaxrb._scene_examples import EXAMPLES, example_path
 
 G = 9.81
 # A ball falling with linear drag: exact z(t) = z0 + (v0 + g/c) (1 - exp(-c t)) / c - g t / c,
@@ -80,6 +85,13 @@ def test_run_writes_outputs(run_dir):
     np.testing.assert_allclose([float(r[3]) for r in rows[1:]], data["pos"][:, 2], rtol=1e-11)
     summary = (run_dir / "summary.txt").read_text()
     assert "ball with linear drag" in summary and "successful" in summary
+    assert _listed_outputs(summary) == sorted(p.name for p in run_dir.iterdir())
+
+
+def _listed_outputs(summary: str) -> list[str]:
+    """The file names of the summary's `output` row, `DIR/ (a, b, ...)`."""
+    line = next(x for x in summary.splitlines() if x.startswith("output "))
+    return sorted(re.search(r"\((.*)\)\s*$", line).group(1).split(", "))
 
 
 def test_run_refuses_to_overwrite(scene_file, run_dir, capsys):
@@ -106,6 +118,11 @@ def test_run_refuses_to_overwrite(scene_file, run_dir, capsys):
     )
     assert "0 .. 0.2" in capsys.readouterr().out
     assert np.load(run_dir / "trajectory.npz")["t"][-1] == 0.2
+    # the saved scene is the one that was run: the file with t_end = 0.2, comments kept
+    saved = (run_dir / "scene.toml").read_text()
+    expected = tomllib.loads(SCENE)
+    expected["simulation"]["t_end"] = 0.2
+    assert tomllib.loads(saved) == expected and "set by --t-end" in saved
 
 
 def test_run_bad_scene_file(tmp_path, capsys):
@@ -115,7 +132,123 @@ def test_run_bad_scene_file(tmp_path, capsys):
     err = capsys.readouterr().err
     assert f"{bad}: [body].mass: must be > 0, got -2.0" in err
     assert main(["run", str(tmp_path / "missing.toml"), "-o", str(tmp_path / "out")]) == 2
-    assert "no such scene file" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "no such scene file" in err and "pendulum" in err
+
+
+PENDULUM = example_path("pendulum").read_text()
+
+
+@pytest.mark.parametrize(
+    "initial, field, problem",
+    [
+        ("vel = [0.0, 0.0, 1.0]", "[initial].vel", "the [joint] (hinge) sets the mass centre's"),
+        ("omega = [3.0, 0.0, 0.0]", "[initial].omega", "the [joint] (hinge) turns the body only"),
+    ],
+)
+def test_run_refuses_motion_the_joint_cannot_have(tmp_path, capsys, initial, field, problem):
+    """A hinge scene given a velocity, or an omega off the axis: exit status 2, one line
+    naming the field and the joint, nothing written."""
+    scene = tmp_path / "hinge.toml"
+    scene.write_text(PENDULUM.replace("[initial]\n", f"[initial]\n{initial}\n"))
+    out = tmp_path / "out"
+    assert main(["run", str(scene), "-o", str(out), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"jaxrb run: error: {scene}: {field}: {problem}"), err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert not out.exists()
+
+
+def test_pendulum_example_bearing_force(tmp_path, capsys):
+    """`jaxrb run pendulum` (the sample problem: m = 7.5 kg, rbar = 0.25 m, k_O = 0.295 m,
+    released from rest with OC horizontal) writes the bearing force, and it matches the closed
+    forms O_n = m g (1 + 2 rbar^2/k_O^2) sin(theta), O_t = m g (1 - rbar^2/k_O^2) cos(theta).
+
+    Tolerance 20 rtol m g: the reaction is an exact function of (theta, theta_dot) at each
+    save, so its error is the solver's global error in theta_dot^2 (O_n; O_t depends on theta
+    alone, through theta_ddot), which the step-size control keeps at a few rtol relative
+    (measured: 4 rtol m g for O_n at rtol = 1e-10, 2e-15 m g for O_t); 20 leaves room for
+    other platforms. The CSV holds 12 significant digits (1e-10 N here).
+    """
+    out = tmp_path / "pendulum"
+    assert main(["run", "pendulum", "-o", str(out), "-q"]) == 0
+    rtol = tomllib.loads(PENDULUM)["simulation"]["rtol"]
+    m, rbar, k_O, g = 7.5, 0.25, 0.295, 9.81
+    tol = 20 * rtol * m * g
+    data = np.load(out / "trajectory.npz")
+    with open(out / "trajectory.csv") as f:
+        rows = [r for r in csv.reader(f) if not r[0].startswith("#")]
+    csv_cols = {name: np.array([float(r[i]) for r in rows[1:]]) for i, name in enumerate(rows[0])}
+    theta = data["joint_angle"]
+    assert theta[0] == 0 and abs(theta[-1] - np.pi) < 1e-6 and np.all(np.diff(theta) > 0)
+    np.testing.assert_allclose(
+        theta, jaxrb.analytic.pendulum_theta(data["t"], rbar, k_O, g), rtol=0, atol=20 * rtol
+    )
+    On, Ot, mag = (
+        np.asarray(x) for x in jaxrb.analytic.pendulum_bearing_force(theta, m, rbar, k_O, g)
+    )
+    # world components: e_n = (-cos, 0, sin), e_t = (-sin, 0, -cos) at theta, O = On e_n - Ot e_t
+    c, s = np.cos(theta), np.sin(theta)
+    world = np.stack([-On * c + Ot * s, 0 * c, On * s + Ot * c], axis=-1)
+    for got in (
+        data,
+        {key: csv_cols[col] for key, col in _CSV.items()} | {"reaction": _xyz(csv_cols)},
+    ):
+        np.testing.assert_allclose(got["reaction_normal"], On, rtol=0, atol=tol)
+        np.testing.assert_allclose(got["reaction_tangential"], Ot, rtol=0, atol=tol)
+        np.testing.assert_allclose(got["reaction_magnitude"], mag, rtol=0, atol=tol)
+        np.testing.assert_allclose(got["reaction_axial"], 0.0, atol=tol)
+        np.testing.assert_allclose(got["reaction"], world, rtol=0, atol=tol)
+    np.testing.assert_allclose(csv_cols["theta"], theta, rtol=1e-11, atol=1e-12)
+    summary = (out / "summary.txt").read_text()
+    assert "reaction.png" in summary and (out / "reaction.png").stat().st_size > 10_000
+    assert _listed_outputs(summary) == sorted(p.name for p in out.iterdir())
+
+
+_CSV = {
+    "reaction_normal": "On",
+    "reaction_tangential": "Ot",
+    "reaction_axial": "Oa",
+    "reaction_magnitude": "Omag",
+}
+
+
+def _xyz(cols):
+    return np.stack([cols["Ox"], cols["Oy"], cols["Oz"]], axis=-1)
+
+
+def test_examples_listed_shown_and_run(tmp_path, capsys):
+    """`jaxrb run --list` names every shipped example, `--show` prints one, and a name runs it
+    (the heavy top, briefly; its scene.toml says what was run)."""
+    assert main(["run", "--list"]) == 0
+    listing = capsys.readouterr().out
+    for name in ("die", "coin", "pendulum", "heavy_top"):
+        assert name in EXAMPLES and re.search(rf"^{name}\s+\S", listing, re.M), listing
+    assert main(["run", "pendulum", "--show"]) == 0
+    assert capsys.readouterr().out == PENDULUM
+    out = tmp_path / "top"
+    assert main(["run", "heavy_top", "-o", str(out), "-q", "--no-plots", "--t-end", "0.05"]) == 0
+    data = np.load(out / "trajectory.npz")
+    assert data["reaction"].shape == (data["t"].size, 3) and "reaction_normal" not in data
+    magnitude = np.linalg.norm(data["reaction"], axis=-1)
+    np.testing.assert_allclose(data["reaction_magnitude"], magnitude, rtol=1e-15)
+    header = (out / "trajectory.csv").read_text().splitlines()[1].split(",")
+    assert header[-4:] == ["Ox", "Oy", "Oz", "Omag"]
+    saved = tomllib.loads((out / "scene.toml").read_text())
+    assert saved["simulation"]["t_end"] == 0.05 and data["t"][-1] == 0.05
+
+
+def test_readme_commands_name_existing_scenes():
+    """Every `jaxrb run` / `jaxrb sweep` line of the README names a shipped example or none
+    (so it runs as written on a fresh clone)."""
+    readme = (Path(__file__).parent.parent / "README.md").read_text()
+    commands = re.findall(r"^jaxrb (?:run|sweep)\b[^#\n]*", readme, re.M)
+    assert len(commands) >= 4
+    for command in commands:
+        words = [w for w in command.split()[2:] if not w.startswith("-")]
+        scene = words[0] if words and not re.match(r"^[\w.]+=", words[0]) else None
+        if scene is not None and not Path(scene).suffix:
+            assert scene in EXAMPLES, command
 
 
 def test_sweep(scene_file, tmp_path, capsys):

@@ -4,10 +4,19 @@ import numpy as np
 import pytest
 
 import jaxrb
-from jaxrb._scene_file import SceneFileError, default_scene_path, load_scene, loads_scene
+from jaxrb._scene_examples import EXAMPLES, example_path
+from jaxrb._scene_file import (
+    SceneFileError,
+    default_scene_path,
+    load_scene,
+    loads_scene,
+    with_t_end,
+)
 
 B = "[body]\nmass = 1.0\ninertia = [1, 2, 3]\n"
 S = "[simulation]\nt_end = 1.0\n"
+HINGE = '[joint]\ntype = "hinge"\npoint = [-0.25, 0, 0]\naxis = [0, 2, 0]\n'
+PIVOT = '[joint]\ntype = "pivot"\npoint = [0, 0, -0.1]\n'
 MINIMAL = """
 [body]
 mass = 2.0
@@ -161,6 +170,19 @@ num_saves = 11
             "[floor]",
             "needs a [body.shape]",
         ),
+        # motion a joint cannot have
+        (
+            B + HINGE + "[initial]\nomega = [1, 2, 0]\n" + S,
+            "[initial].omega",
+            "the [joint] (hinge) turns the body only about its axis [0, 1, 0] (body frame); "
+            "omega = [1, 2, 0] rad/s has the part [1, 0, 0] off that axis",
+        ),
+        (
+            B + PIVOT + "[initial]\nomega = [0, 0, 5]\nvel = [1, 0, 0]\n" + S,
+            "[initial].vel",
+            "the [joint] (pivot) sets the mass centre's velocity from omega, "
+            "R (omega x (C - O)) = [0, 0, 0] m/s; got [1, 0, 0] m/s: leave `vel` out",
+        ),
     ],
 )
 def test_invalid_files_name_field_and_problem(text, field, problem):
@@ -176,3 +198,39 @@ def test_not_toml_and_missing_file(tmp_path):
         loads_scene("[body\nmass = 1")
     with pytest.raises(SceneFileError, match="no such scene file"):
         load_scene(tmp_path / "nope.toml")
+
+
+def test_joint_motion_that_fits_is_accepted():
+    """omega along a hinge's axis, and the velocity the joint gives the mass centre."""
+    spec = loads_scene(B + HINGE + "[initial]\nomega = [0, 3, 0]\nvel = [0, 0, -0.75]\n" + S)
+    np.testing.assert_allclose(spec.state0.vel, [0.0, 0.0, -0.75])
+    spec = loads_scene(B + PIVOT + "[initial]\nomega = [2, 0, 5]\nvel = [0, -0.2, 0]\n" + S)
+    np.testing.assert_allclose(spec.state0.omega, [2.0, 0.0, 5.0])
+
+
+def test_with_t_end_keeps_the_file_and_sets_t_end():
+    text = load_scene(default_scene_path()).data
+    new = with_t_end(default_scene_path().read_text(), 0.25)
+    assert loads_scene(new).data == {**text, "simulation": {**text["simulation"], "t_end": 0.25}}
+    assert "# A 16 mm plastic die" in new and "set by --t-end (the file had 0.6)" in new
+    inline = "simulation = {t_end = 1.0}\n" + B
+    with pytest.raises(SceneFileError, match=r"\[simulation\].t_end: --t-end cannot rewrite"):
+        with_t_end(inline, 2.0, "inline.toml")
+
+
+@pytest.mark.parametrize("name", list(EXAMPLES))
+def test_examples_parse(name):
+    spec = load_scene(example_path(name))
+    assert spec.title and spec.ts.size >= 2
+
+
+def test_pendulum_example_is_the_sample_problem():
+    """m = 7.5 kg, rbar = 0.25 m, k_O = 0.295 m, released from rest with OC horizontal."""
+    from jaxrb._reaction import released_pendulum
+
+    spec = load_scene(example_path("pendulum"))
+    release = released_pendulum(spec.scene, spec.state0)
+    assert release is not None and release.sign == 1.0
+    np.testing.assert_allclose(
+        [release.mass, release.rbar, release.k_O, release.g], [7.5, 0.25, 0.295, 9.81], rtol=1e-14
+    )
