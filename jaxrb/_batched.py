@@ -27,7 +27,7 @@ import numpy as np
 
 from ._dynamics import vector_field
 from ._forces import Gravity
-from ._inputs import check_concrete_inputs, input_result
+from ._inputs import check_concrete_inputs, check_solver_settings, input_result, safe_times
 from ._quaternion import quat_normalize
 from ._results import RESULTS
 from ._simulate import _coordinates
@@ -296,7 +296,8 @@ def simulate_batch(
       `XLA_FLAGS=--xla_force_host_platform_device_count=K` (set before JAX is imported):
       then K cores can share the batch. The benchmarks set K to the number of cores.
     - `throw`: raise if the input is bad or `max_steps` is hit; else return per-body
-      `result` codes.
+      `result` codes: a bad body is flagged (and starts from rest, taking no part in the
+      step control) while the others are computed.
 
     **Returns:** a `jaxrb.Trajectory` whose `states` leaves have shape (N, T, ...) (as
     `jax.vmap(simulate)` returns), and `result`, `quat_norm_drift`, `num_steps` of shape (N,).
@@ -325,7 +326,9 @@ def simulate_batch(
         raise ValueError(f"ts must be a 1-D array of save times, got shape {ts.shape}")
     ts = ts.astype(dtype)
     states0 = jax.tree.map(lambda x: jnp.asarray(x, dtype), states0)
-    check_concrete_inputs(states0, ts)
+    if throw:
+        check_concrete_inputs(states0, ts)
+    check_solver_settings(rtol, atol, dt0, max_steps, throw)
     # tolerances and the step budget are traced values: changing them does not recompile
     rtol, atol = jnp.asarray(rtol, dtype), jnp.asarray(atol, dtype)
     max_steps = jnp.asarray(max_steps, jnp.int32)
@@ -397,8 +400,25 @@ def _simulate_batch(scene, states0, ts, rtol, atol, dt0, max_steps, batched_scen
     n_save = ts.shape[0]
     dtype = ts.dtype
 
-    def rhs_one(t, y, state0, scene_):
-        return coords.coordinate_rates(y, vector_field(t, coords.expand(y, state0), scene_))
+    # Per-body input checks. A bad body starts from rest at the identity and its rates are
+    # zero, so it neither takes the batch's steps down with it nor stops the others.
+    scene_axes = 0 if batched_scene else None
+    member = jax.vmap(input_result, in_axes=(scene_axes, 0, None))(scene, states0, ts)
+    valid = member == RESULTS.successful
+    ts = safe_times(ts, jnp.all(jnp.isfinite(ts)) & jnp.all(jnp.diff(ts) >= 0))
+    rest = State(
+        jnp.zeros(3, dtype),
+        jnp.array([1.0, 0.0, 0.0, 0.0], dtype),
+        jnp.zeros(3, dtype),
+        jnp.zeros(3, dtype),
+    )
+    states0 = jax.tree.map(
+        lambda x, r: jnp.where(valid.reshape((-1,) + (1,) * (x.ndim - 1)), x, r), states0, rest
+    )
+
+    def rhs_one(t, y, state0, scene_, ok):
+        rates = coords.coordinate_rates(y, vector_field(t, coords.expand(y, state0), scene_))
+        return jax.tree.map(lambda r: jnp.where(ok, r, 0.0), rates)
 
     if isinstance(coords, _BallisticFree):
         # Rotation only, no forces in play: Euler's equations and the quaternion kinematics
@@ -408,16 +428,15 @@ def _simulate_batch(scene, states0, ts, rtol, atol, dt0, max_steps, batched_scen
         batch_axis = 0
 
         def rhs(t, y):
-            return rhs_one(t, y, states0, scene)
+            return rhs_one(t, y, states0, scene, valid[:, None])
     else:
         # Any force model or joint: map the one-body right-hand side over the batch (which
         # every force supports) on a structure of arrays, each leaf (components..., N).
         batch_axis = -1
-        scene_axes = 0 if batched_scene else None
-        rhs_soa = jax.vmap(rhs_one, in_axes=(None, -1, 0, scene_axes), out_axes=-1)
+        rhs_soa = jax.vmap(rhs_one, in_axes=(None, -1, 0, scene_axes, 0), out_axes=-1)
 
         def rhs(t, y):
-            return rhs_soa(t, y, states0, scene)
+            return rhs_soa(t, y, states0, scene, valid)
 
     y0 = jax.tree.map(lambda x: jnp.moveaxis(x, 0, batch_axis), coords.reduce(states0))
 
@@ -492,13 +511,10 @@ def _simulate_batch(scene, states0, ts, rtol, atol, dt0, max_steps, batched_scen
         states = State(pos, states.quat, vel, states.omega)
     raw = jax.vmap(jax.vmap(coords.raw_quat_norm))(ys)
     drift = jnp.broadcast_to(jnp.max(jnp.abs(raw - 1), axis=1), (n_batch,))
-    # Input checks cover the whole batch (the first problem found is reported for every body);
-    # the step-size controller is batch-wide, so max_steps is too.
-    base = input_result(scene, states0, ts)
+    # the step-size controller is batch-wide, so max_steps is too
     finished = idx >= n_save
     solver_result = RESULTS.where(finished, RESULTS.successful, RESULTS.max_steps_reached)
-    result = RESULTS.where(base == RESULTS.successful, solver_result, base)
-    result = jax.tree.map(lambda v: jnp.broadcast_to(v, (n_batch,)), result)
+    result = jax.vmap(lambda ok, m: RESULTS.where(ok, solver_result, m))(valid, member)
     traj = Trajectory(
         ts=ts,
         states=states,

@@ -5,6 +5,8 @@ argument. Value checks that need concrete numbers (non-finite input) raise only 
 value is concrete, i.e. outside jit; under jit they are the caller's job (result flags).
 """
 
+from typing import NamedTuple
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -34,3 +36,43 @@ def require_finite(arr: jax.Array, name: str) -> None:
     """Raise a ValueError naming `name` if a concrete `arr` holds NaN or inf."""
     if is_concrete(arr) and not bool(np.all(np.isfinite(np.asarray(arr)))):
         raise ValueError(f"{name} contains non-finite values (NaN or inf)")
+
+
+class Requirement(NamedTuple):
+    """A condition on a model parameter: `ok` is True (elementwise) where `value` obeys `rule`.
+
+    Models list their requirements once (`requirements()`); the same list raises a ValueError
+    for concrete values where the model is made and gives a traceable flag in `simulate`.
+    """
+
+    field: str
+    value: object
+    rule: str
+    ok: jax.Array
+
+
+def finite(x) -> jax.Array:
+    return jnp.isfinite(x)
+
+
+def finite_positive(x) -> jax.Array:
+    return jnp.isfinite(x) & (x > 0)
+
+
+def finite_nonnegative(x) -> jax.Array:
+    return jnp.isfinite(x) & (x >= 0)
+
+
+def all_met(requirements) -> jax.Array:
+    """True when every requirement holds everywhere (traceable)."""
+    return jnp.all(jnp.array([jnp.all(r.ok) for r in requirements] or [True]))
+
+
+def raise_unmet(owner: str, requirements) -> None:
+    """Raise a ValueError naming `owner.field`, the rule and the value, for the first
+    concrete requirement that fails; traced requirements are left to the result flag."""
+    for r in requirements:
+        if is_concrete(r.ok) and not bool(np.all(np.asarray(r.ok))):
+            value = np.asarray(r.value)
+            shown = value.tolist() if value.size <= 9 else f"an array of shape {value.shape}"
+            raise ValueError(f"{owner}.{r.field} must be {r.rule}, got {shown}")

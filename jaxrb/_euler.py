@@ -33,7 +33,7 @@ import math
 import jax.numpy as jnp
 
 from ._checks import as_float_array
-from ._quaternion import _safe_norm, matrix_to_quat
+from ._quaternion import _safe_norm, matrix_to_quat, require_nonzero, unit_vector
 from ._typing import Array, Float, Mat3, Quat, Vec3
 
 SEQUENCES = ("121", "123", "131", "132", "212", "213", "231", "232", "312", "313", "321", "323")
@@ -134,7 +134,8 @@ def quat_to_euler(q: Quat, seq: str) -> Vec3:
     **Arguments:**
 
     - `q`: quaternion(s) (e0, e1, e2, e3), scalar first, mapping body to world, shape
-      (..., 4). Need not be normalised (the formulas are scale invariant), must be non-zero.
+      (..., 4), of any finite non-zero norm (it is rescaled first). A zero quaternion is no
+      attitude: a ValueError when concrete, NaN angles under jit.
     - `seq`: one of `jaxrb.EULER_SEQUENCES` ("121", ..., "323").
 
     **Returns:**
@@ -143,6 +144,8 @@ def quat_to_euler(q: Quat, seq: str) -> Vec3:
     convention at singular attitudes (phi3 = 0) as in `matrix_to_euler`.
     """
     q, seq = _check_seq_and_quat(q, seq, "q")
+    require_nonzero(q, "q")
+    q = unit_vector(q)
     s0, s1, d0, d1, hs, hd, proper, eps = _canonical(q, seq)
     phi2, dist = _middle_and_distance(hs, hd, proper)
     tol = _SNAP_EPS * jnp.finfo(q.dtype).eps
@@ -159,7 +162,8 @@ def quat_to_euler(q: Quat, seq: str) -> Vec3:
     phi3 = jnp.where(singular, 0.0, phi3_reg)
     if not proper:
         phi3 = eps * phi3
-    return jnp.stack([_wrap(phi1), phi2, _wrap(phi3)], axis=-1)
+    angles = jnp.stack([_wrap(phi1), phi2, _wrap(phi3)], axis=-1)
+    return jnp.where(jnp.isnan(q[..., :1]), jnp.nan, angles)
 
 
 def matrix_to_euler(R: Mat3, seq: str) -> Vec3:

@@ -2,9 +2,8 @@
 
 import equinox as eqx
 import jax.numpy as jnp
-import numpy as np
 
-from ._checks import is_concrete
+from ._checks import Requirement, finite, finite_nonnegative, raise_unmet
 
 
 class Floor(eqx.Module):
@@ -27,14 +26,15 @@ class Floor(eqx.Module):
         self.friction = jnp.asarray(friction, dtype=float)
         self.height = jnp.asarray(height, dtype=float)
 
+    def requirements(self) -> tuple[Requirement, ...]:
+        """Conditions on the floor's parameters: a ValueError naming the field for concrete
+        values where the floor is made, a result flag in `simulate` for traced ones."""
+        e, mu, h = self.restitution, self.friction, self.height
+        return (
+            Requirement("restitution", e, "in [0, 1]", (e >= 0) & (e <= 1)),
+            Requirement("friction", mu, "finite and >= 0", finite_nonnegative(mu)),
+            Requirement("height", h, "finite", finite(h)),
+        )
+
     def __check_init__(self):
-        if is_concrete(self.restitution):
-            e = np.asarray(self.restitution)
-            if not np.all((e >= 0) & (e <= 1)):
-                raise ValueError(f"restitution must be in [0, 1], got {e}")
-        if is_concrete(self.friction):
-            mu = np.asarray(self.friction)
-            if not np.all((mu >= 0) & np.isfinite(mu)):
-                raise ValueError(f"friction must be finite and >= 0, got {mu}")
-        if is_concrete(self.height) and not np.all(np.isfinite(np.asarray(self.height))):
-            raise ValueError(f"height must be finite, got {self.height}")
+        raise_unmet("Floor", self.requirements())

@@ -12,14 +12,31 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from ._body import RigidBody
-from ._checks import as_float_array
+from ._checks import (
+    Requirement,
+    as_float_array,
+    finite,
+    finite_nonnegative,
+    raise_unmet,
+)
 from ._quaternion import _safe_norm, quat_conjugate, quat_rotate
 from ._state import State
 from ._typing import Vec3
 
 
 class AbstractForce(eqx.Module):
-    """A force model: `wrench(t, state, body) -> (force_world, moment_body)`."""
+    """A force model: `wrench(t, state, body) -> (force_world, moment_body)`.
+
+    Parameters are checked where the force is made (a ValueError naming the field for
+    concrete values) and by `simulate` (`RESULTS.invalid_force` for traced ones).
+    """
+
+    def requirements(self) -> tuple[Requirement, ...]:
+        """The conditions on the force's parameters; none by default."""
+        return ()
+
+    def __check_init__(self):
+        raise_unmet(type(self).__name__, self.requirements())
 
     @abc.abstractmethod
     def wrench(self, t, state: State, body: RigidBody) -> tuple[Vec3, Vec3]:
@@ -42,6 +59,9 @@ class Gravity(AbstractForce):
     def __init__(self, g=(0.0, 0.0, -9.81)):
         self.g = as_float_array(g, "g", (3,))
 
+    def requirements(self):
+        return (Requirement("g", self.g, "finite", finite(self.g)),)
+
     def wrench(self, t, state, body):
         force = body.mass[..., None] * self.g.astype(state.pos.dtype)
         return jnp.broadcast_to(force, state.pos.shape), _zero3(state)
@@ -58,6 +78,10 @@ class LinearDrag(AbstractForce):
     def __init__(self, coefficient):
         self.coefficient = jnp.asarray(coefficient, dtype=float)
 
+    def requirements(self):
+        c = self.coefficient
+        return (Requirement("coefficient", c, "finite and >= 0", finite_nonnegative(c)),)
+
     def wrench(self, t, state, body):
         return -self.coefficient[..., None] * state.vel, _zero3(state)
 
@@ -72,6 +96,10 @@ class QuadraticDrag(AbstractForce):
 
     def __init__(self, coefficient):
         self.coefficient = jnp.asarray(coefficient, dtype=float)
+
+    def requirements(self):
+        c = self.coefficient
+        return (Requirement("coefficient", c, "finite and >= 0", finite_nonnegative(c)),)
 
     @classmethod
     def from_air(cls, rho=1.225, drag_coefficient=1.0, area=1.0):
@@ -95,6 +123,13 @@ class DampingMoment(AbstractForce):
     def __init__(self, linear=0.0, quadratic=0.0):
         self.linear = jnp.asarray(linear, dtype=float)
         self.quadratic = jnp.asarray(quadratic, dtype=float)
+
+    def requirements(self):
+        lin, quad = self.linear, self.quadratic
+        return (
+            Requirement("linear", lin, "finite and >= 0", finite_nonnegative(lin)),
+            Requirement("quadratic", quad, "finite and >= 0", finite_nonnegative(quad)),
+        )
 
     def wrench(self, t, state, body):
         rate = _safe_norm(state.omega, keepdims=True)
@@ -130,6 +165,14 @@ class Wrench(AbstractForce):
         )
         self.point = None if point is None else as_float_array(point, "point", (3,))
         self.frame = frame
+
+    def requirements(self):
+        arrays = {"force": self.force, "torque": self.torque, "point": self.point}
+        return tuple(
+            Requirement(name, x, "finite", finite(x))
+            for name, x in arrays.items()
+            if x is not None and not callable(x)
+        )
 
     @staticmethod
     def _value(x, t, like):

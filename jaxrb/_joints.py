@@ -17,13 +17,14 @@ import jax.numpy as jnp
 
 from . import inertia as _inertia
 from ._body import RigidBody
-from ._checks import as_float_array
+from ._checks import Requirement, as_float_array, finite, raise_unmet
 from ._quaternion import (
     axis_angle_to_quat,
     quat_conjugate,
     quat_multiply,
     quat_normalize,
     quat_rotate,
+    unit_vector,
 )
 from ._rotational import angular_acceleration
 from ._state import State
@@ -34,6 +35,14 @@ class AbstractJoint(eqx.Module):
     """A joint holding one body point fixed in the world."""
 
     point: eqx.AbstractVar[jnp.ndarray]
+
+    def requirements(self) -> tuple[Requirement, ...]:
+        """Conditions on the joint's parameters: a ValueError naming the field for concrete
+        values where the joint is made, `RESULTS.invalid_joint` in `simulate` for traced ones."""
+        return (Requirement("point", self.point, "finite", finite(self.point)),)
+
+    def __check_init__(self):
+        raise_unmet(type(self).__name__, self.requirements())
 
     def anchor(self, state0: State) -> Vec3:
         """World position (m) of the fixed point: where `point` is in `state0`."""
@@ -132,7 +141,15 @@ class Hinge(AbstractJoint):
     def __init__(self, point=(0.0, 0.0, 0.0), axis=(0.0, 0.0, 1.0)):
         self.point = as_float_array(point, "point", (3,))
         axis = as_float_array(axis, "axis", (3,))
-        self.axis = axis / jnp.linalg.norm(axis, axis=-1, keepdims=True)
+        unit = unit_vector(axis)  # NaN for a zero axis: flagged by `requirements`
+        raise_unmet(
+            "Hinge", (Requirement("axis", axis, "a finite non-zero direction", finite(unit)),)
+        )
+        self.axis = unit
+
+    def requirements(self):
+        rule = "a finite non-zero direction"
+        return (*super().requirements(), Requirement("axis", self.axis, rule, finite(self.axis)))
 
     def angular_acceleration(self, state, body, moment_about_point):
         a = self.axis.astype(state.omega.dtype)

@@ -5,9 +5,11 @@ for a rotation by phi about the unit axis v. q maps body to world: r_world = R(q
 All functions accept leading batch axes and are jit/vmap/grad safe.
 """
 
+import jax
 import jax.numpy as jnp
+import numpy as np
 
-from ._checks import as_float_array
+from ._checks import as_float_array, is_concrete
 from ._typing import Float, Mat3, Quat, Vec3
 
 
@@ -39,10 +41,31 @@ def quat_conjugate(q: Quat) -> Quat:
     return q * jnp.array([1.0, -1.0, -1.0, -1.0], dtype=q.dtype)
 
 
+def unit_vector(x):
+    """x / |x| along the last axis, exact for any finite non-zero length (no overflow of
+    |x|^2 above ~1e154 or underflow below ~1e-154): x is first divided by its largest
+    entry, in two halves (XLA may divide by multiplying with the reciprocal, and 1/1e308 is
+    subnormal, which the CPU flushes to zero). NaN for a zero vector."""
+    scale = jax.lax.stop_gradient(jnp.max(jnp.abs(x), axis=-1, keepdims=True))
+    half = jnp.sqrt(jnp.where(scale > 0, scale, 1.0))
+    scaled = x / half / half
+    return scaled / jnp.linalg.norm(scaled, axis=-1, keepdims=True)
+
+
+def require_nonzero(q, name: str) -> None:
+    """Raise a ValueError naming `name` if a concrete quaternion has zero norm."""
+    if is_concrete(q) and np.any(np.all(np.asarray(q) == 0, axis=-1)):
+        raise ValueError(f"{name} has zero norm: it is no attitude")
+
+
 def quat_normalize(q: Quat) -> Quat:
-    """q / |q|."""
+    """q / |q|, for any finite non-zero norm (1e-300 to 1e300 in float64).
+
+    A zero quaternion raises a ValueError when concrete and gives NaN under jit.
+    """
     q = as_float_array(q, "q", (4,))
-    return q / jnp.linalg.norm(q, axis=-1, keepdims=True)
+    require_nonzero(q, "q")
+    return unit_vector(q)
 
 
 def quat_to_matrix(q: Quat) -> Mat3:

@@ -18,6 +18,18 @@ class RESULTS(dfx.RESULTS):  # pyright: ignore
     nonfinite_state = "the initial state contains NaN or inf."
     zero_quaternion = "the initial quaternion has zero norm."
     decreasing_times = "the save times `ts` must be non-decreasing."
+    nonfinite_times = "the save times `ts` must be finite."
+    invalid_shape = "the body's shape dimensions must be finite and > 0."
+    invalid_force = (
+        "a force parameter is invalid (gravity and wrench values must be finite; drag and "
+        "damping coefficients finite and >= 0)."
+    )
+    invalid_joint = "the joint's point must be finite and its axis a finite non-zero direction."
+    invalid_floor_height = "the floor's height must be finite."
+    invalid_tolerances = (
+        "the solver settings are invalid (rtol and atol must be finite and >= 0, not both 0; "
+        "dt0 finite and > 0)."
+    )
     invalid_restitution = "the floor's restitution must be in [0, 1]."
     invalid_friction = "the floor's friction coefficient must be finite and >= 0."
     max_impacts_reached = "the maximum number of impacts was reached before the end time."

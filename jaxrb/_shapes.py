@@ -10,13 +10,24 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from . import inertia as _inertia
-from ._checks import as_float_array
+from ._checks import Requirement, as_float_array, finite_positive, raise_unmet
 from ._quaternion import _safe_norm, quat_conjugate, quat_rotate
 from ._typing import Mat3, Quat, Vec3
 
 
 class AbstractShape(eqx.Module):
-    """A convex solid centred on the mass centre, in body axes (m)."""
+    """A convex solid centred on the mass centre, in body axes (m).
+
+    Dimensions must be finite and > 0: concrete values raise a ValueError naming the field
+    where the shape is made; traced ones give `RESULTS.invalid_shape` in `simulate`.
+    """
+
+    @abc.abstractmethod
+    def requirements(self) -> tuple[Requirement, ...]:
+        """The conditions on the shape's dimensions (see `jaxrb._checks.Requirement`)."""
+
+    def __check_init__(self):
+        raise_unmet(type(self).__name__, self.requirements())
 
     @abc.abstractmethod
     def inertia(self, mass) -> Mat3:
@@ -49,6 +60,9 @@ class Sphere(AbstractShape):
     def __init__(self, radius):
         self.radius = jnp.asarray(radius, dtype=float)
 
+    def requirements(self):
+        return (Requirement("radius", self.radius, "finite and > 0", finite_positive(self.radius)),)
+
     def inertia(self, mass) -> Mat3:
         return _inertia.sphere(mass, self.radius)
 
@@ -64,6 +78,10 @@ class Box(AbstractShape):
 
     def __init__(self, half_extents):
         self.half_extents = as_float_array(half_extents, "half_extents", (3,))
+
+    def requirements(self):
+        ext = self.half_extents
+        return (Requirement("half_extents", ext, "finite and > 0", finite_positive(ext)),)
 
     def inertia(self, mass) -> Mat3:
         w, h, d = (
@@ -94,6 +112,13 @@ class Cylinder(AbstractShape):
     def __init__(self, radius, half_height):
         self.radius = jnp.asarray(radius, dtype=float)
         self.half_height = jnp.asarray(half_height, dtype=float)
+
+    def requirements(self):
+        r, h = self.radius, self.half_height
+        return (
+            Requirement("radius", r, "finite and > 0", finite_positive(r)),
+            Requirement("half_height", h, "finite and > 0", finite_positive(h)),
+        )
 
     def inertia(self, mass) -> Mat3:
         return _inertia.cylinder(mass, self.radius, 2 * self.half_height, axis=2)

@@ -5,9 +5,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._checks import as_float_array
+from ._checks import all_met, as_float_array
 from ._dynamics import vector_field
-from ._inputs import check_concrete_inputs, input_result
+from ._inputs import check_concrete_inputs, check_solver_settings, input_result, safe_times
 from ._quaternion import quat_normalize
 from ._results import RESULTS
 from ._state import State
@@ -78,8 +78,11 @@ def simulate(
     - `adjoint`: diffrax adjoint; default `RecursiveCheckpointAdjoint()` (reverse mode). For
       forward-mode differentiation (`jax.jacfwd`) pass `diffrax.ForwardMode()`.
     - `progress_meter`: e.g. `diffrax.TqdmProgressMeter()` for long runs.
-    - `throw`: if True (default) raise on bad input or solver failure; if False, return a
-      per-trajectory `result` code instead (use this under `jax.vmap`).
+    - `throw`: if True (default) raise on bad input or solver failure (concrete bad values
+      raise a ValueError naming the field before anything is compiled); if False, return a
+      per-trajectory `result` code instead, for concrete and traced input alike (use this
+      under `jax.vmap`: a bad member is flagged and takes no solver steps, the others are
+      computed). Structural mistakes (wrong shapes or types) always raise.
     - `max_impacts`, `rest_speed`: scenes with a floor only: shortcuts for the options of the
       same names in `contact` (the bound on the number of impacts, default 64; the speed below
       which a bounce series is replaced by its limit, default 1e-2 m/s).
@@ -101,7 +104,17 @@ def simulate(
         raise TypeError(f"state0 must be a jaxrb.State, got {type(state0).__name__}")
     for name, n in (("pos", 3), ("quat", 4), ("vel", 3), ("omega", 3)):
         as_float_array(getattr(state0, name), f"state0.{name}", (n,))
-    check_concrete_inputs(state0, ts)
+    if throw:
+        check_concrete_inputs(state0, ts)
+    settings_ok = all_met(
+        check_solver_settings(
+            rtol if stepsize_controller is None else 1.0,
+            atol if stepsize_controller is None else 1.0,
+            dt0,
+            max_steps,
+            throw,
+        )
+    )
     if solver is None:
         solver = dfx.Tsit5()
     if stepsize_controller is None:
@@ -128,6 +141,7 @@ def simulate(
             max_steps=max_steps,
             throw=throw,
             options=contact,
+            settings_ok=settings_ok,
         )
     if progress_meter is None:
         progress_meter = dfx.NoProgressMeter()
@@ -143,15 +157,28 @@ def simulate(
         dt0,
         max_steps,
         throw,
+        settings_ok,
     )
 
 
 @eqx.filter_jit
 def _simulate_smooth(
-    scene, state0, ts, solver, stepsize_controller, adjoint, progress_meter, dt0, max_steps, throw
+    scene,
+    state0,
+    ts,
+    solver,
+    stepsize_controller,
+    adjoint,
+    progress_meter,
+    dt0,
+    max_steps,
+    throw,
+    settings_ok,
 ):
     coords = _coordinates(scene)
     y0 = coords.reduce(state0)
+    result = input_result(scene, state0, ts, settings_ok)
+    run_ts = safe_times(ts, result == RESULTS.successful)
 
     def rhs(t, y, args):
         state = coords.expand(y, state0)
@@ -160,11 +187,11 @@ def _simulate_smooth(
     sol = dfx.diffeqsolve(
         dfx.ODETerm(rhs),
         solver,
-        t0=ts[0],
-        t1=ts[-1],
+        t0=run_ts[0],
+        t1=run_ts[-1],
         dt0=dt0,
         y0=y0,
-        saveat=dfx.SaveAt(ts=ts),
+        saveat=dfx.SaveAt(ts=run_ts),
         stepsize_controller=stepsize_controller,
         adjoint=adjoint,
         max_steps=max_steps,
@@ -173,7 +200,6 @@ def _simulate_smooth(
     )
     states = jax.vmap(lambda y: coords.expand(y, state0))(sol.ys)
     drift = jnp.max(jnp.abs(jax.vmap(coords.raw_quat_norm)(sol.ys) - 1))
-    result = input_result(scene, state0, ts)
     result = RESULTS.where(result == RESULTS.successful, RESULTS.promote(sol.result), result)
     traj = Trajectory(
         ts=ts,

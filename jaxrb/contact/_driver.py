@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 
 from .._checks import is_concrete
-from .._inputs import input_result
+from .._inputs import input_result, safe_times
 from .._quaternion import quat_normalize
 from .._results import RESULTS
 from .._state import State
@@ -48,10 +48,22 @@ def _sliding(mode):
 
 
 def simulate_contact(
-    scene, state0, ts, *, solver, stepsize_controller, adjoint, dt0, max_steps, throw, options
+    scene,
+    state0,
+    ts,
+    *,
+    solver,
+    stepsize_controller,
+    adjoint,
+    dt0,
+    max_steps,
+    throw,
+    options,
+    settings_ok=True,
 ) -> Trajectory:
     """`jaxrb.simulate` for a scene with a floor (it resolves the solver, controller and
-    adjoint defaults). `options` is a `ContactOptions`."""
+    adjoint defaults). `options` is a `ContactOptions`; `settings_ok` whether the solver
+    settings are valid."""
     if scene.body.shape is None:
         raise ValueError(
             "a scene with a floor needs a body shape (Sphere, Box or Cylinder) for contact"
@@ -63,7 +75,8 @@ def simulate_contact(
     ts = jnp.asarray(ts)
     state0 = jax.tree.map(lambda x: jnp.asarray(x, ts.dtype), state0)
     tol = options.resolved(ts.dtype)
-    if all(is_concrete(x) for x in (*jax.tree.leaves(state0), *jax.tree.leaves(scene))):
+    concrete = all(is_concrete(x) for x in (*jax.tree.leaves(state0), *jax.tree.leaves(scene)))
+    if throw and concrete:
         d0 = float(
             scene.body.shape.floor_distance(
                 state0.pos, quat_normalize(state0.quat), scene.floor.height
@@ -88,6 +101,7 @@ def simulate_contact(
         options,
         tol,
         kind,
+        settings_ok,
     )
 
 
@@ -105,13 +119,15 @@ def _simulate_contact(
     options,
     tol,
     loop_kind,
+    settings_ok,
 ):
     dtype = ts.dtype
     model = contact_model(scene.body.shape)
+    result = input_result(scene, state0, ts, settings_ok)
+    user_ts, ts = ts, safe_times(ts, result == RESULTS.successful)
     t_end = ts[-1]
     T = ts.shape[0]
     y0 = unit_state(state0)
-    result = input_result(scene, state0, ts)
     d0 = scene.body.shape.floor_distance(y0.pos, y0.quat, scene.floor.height)
     result = RESULTS.where(
         (result == RESULTS.successful) & (d0 < -tol.contact), RESULTS.starts_below_floor, result
@@ -291,7 +307,7 @@ def _simulate_contact(
         **carry["log"],
     )
     traj = Trajectory(
-        ts=ts,
+        ts=user_ts,
         states=states,
         result=result,
         quat_norm_drift=drift,
