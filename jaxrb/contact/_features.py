@@ -270,6 +270,7 @@ class CylinderContact(AbstractContactModel):
 
 
 CONTACT_MODELS = {Sphere: SphereContact, Box: BoxContact, Cylinder: CylinderContact}
+"""The contact model of each shape class (`contact_model` looks a shape up here)."""
 
 
 def contact_model(shape: AbstractShape) -> AbstractContactModel:

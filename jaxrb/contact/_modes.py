@@ -31,6 +31,8 @@ from .._state import State
 
 FLIGHT, POINT, PAIR, FACE = 0, 1, 2, 3
 KIND_NAMES = ("flight", "point", "pair", "face")
+"""The names of the contact modes, indexed by the codes in `ContactLog.kind` and
+`ContactLog.event_kind`."""
 NUM_ROWS = 6
 
 

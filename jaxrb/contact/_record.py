@@ -101,5 +101,5 @@ class ContactLog(eqx.Module):
     event_sliding: jax.Array
 
 
-# what ended a segment (`ContactLog.event_cause`)
 CAUSES = ("start", "touch", "flat", "lift-off", "slip starts", "slip stops", "tip")
+"""The names of the event causes, indexed by the codes in `ContactLog.event_cause`."""
