@@ -83,7 +83,7 @@ def make_errors(omega0):
 
 
 def rk4_fixed(scene, n_steps):
-    """A fixed-step RK4 written directly in jnp, vmapped: the FINDINGS baseline."""
+    """A fixed-step RK4 written directly in jnp, vmapped: the hand-written baseline."""
     h = T_END / n_steps
 
     def one(state):
