@@ -12,7 +12,10 @@ SCENE is a scene file (TOML) or the name of a shipped example (`_scene_examples.
 none, the default scene is used (the die: thrown with spin onto a table).
 Outputs go to `jaxrb-output/` (change with `-o`); existing files are never overwritten unless
 `--force` is given. User errors exit with status 2, a failed simulation or a fit that does not
-converge with 1. The command line computes in float64 (it enables `jax_enable_x64`).
+converge with 1. `run` and `sweep` write atomically (`StagedOutput`: all their files appear
+together, or none) and report every failure, an unexpected one included (status 1), as one
+line on stderr, never a traceback. The command line computes in float64 (it enables
+`jax_enable_x64`).
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from __future__ import annotations
 import argparse
 import copy
 import csv
+import math
 import sys
 import time
 from pathlib import Path
@@ -28,12 +32,16 @@ import numpy as np
 
 from ._cli_common import (
     CLIError,
+    StagedOutput,
     _fmt,
-    _outputs_free,
     _table,
     add_output_options,
+    one_line,
 )
 from ._cli_fit import add_fit_parser
+
+MAX_SWEEP_RUNS = 100_000
+"""The most grid points (runs) one `jaxrb sweep` may have."""
 
 _EPILOG_RUN = """\
 examples (SCENE may name one; an existing file of that name takes precedence):
@@ -50,6 +58,11 @@ outputs (in OUTPUT):
                      solver's drift on its own axes), reaction.png (a scene with a joint)
   animation.gif      with --animate (fixed camera, the floor in view)
   summary.txt        the printed summary table
+the files appear together once all are written (a failed run writes none); existing ones
+are replaced only with --force.
+
+exit status: 0 done; 2 bad input (scene file, option, output path: one line names it);
+1 the simulation failed (solver failure, or a value that overflowed: nothing written).
 
 frames: pos/vel world frame (z up); omega body frame; quat scalar first, body -> world.
 joint reaction O (N): the force the joint exerts on the body, world frame; for a hinge, theta
@@ -61,7 +74,7 @@ Ot = m g (1 - rbar^2/k_O^2) cos(theta) in reaction.png (example: pendulum).
 the scene file format is documented in the default scene: jaxrb run --show-default
 """
 
-_EPILOG_SWEEP = """\
+_EPILOG_SWEEP = f"""\
 grid parameters (-p/--param, repeatable; the grid is their Cartesian product):
   PATH=START:STOP:NUM   NUM evenly spaced values (inclusive), e.g. floor.restitution=0.2:0.8:4
   PATH=V1,V2,...        explicit values, e.g. body.mass=0.004,0.005
@@ -69,7 +82,11 @@ PATH is a dotted path into the scene file: body.mass, floor.friction, initial.om
 forces.1.coefficient (the second [[forces]] table), simulation.t_end, ...
 
 output: OUTPUT/sweep.csv, one row per grid point: the parameters, the solver result,
-final position and speed, |omega|, energies, max height, impacts, solver steps.
+final position and speed, |omega|, energies, max height, impacts, solver steps. Every grid
+point is checked before the first run; a run whose solver fails or whose motion overflows
+is a row with a failed result. At most {MAX_SWEEP_RUNS} grid points.
+
+exit status: 0 done; 2 bad input (scene file, --param, output path: one line names it).
 """
 
 
@@ -97,12 +114,72 @@ def _load(scene_arg):
     return load_scene(path), path
 
 
+def _show(args) -> int:
+    """`jaxrb run [SCENE] --show` / `--show-default`: print the scene file."""
+    from ._scene_file import read_scene_text
+
+    path = _scene_path(None if args.show_default else args.scene)
+    print(read_scene_text(path), end="")
+    return 0
+
+
 def _list_examples() -> int:
     from ._scene_examples import example_titles
 
     print(_table(example_titles(), header=("name", "title"), right=False))
     print("\nrun one: jaxrb run NAME; print its scene file: jaxrb run NAME --show")
     return 0
+
+
+# result codes of `jaxrb.RESULTS` that report bad input (exit status 2), not a failed solve
+_INPUT_RESULTS = (
+    "invalid_mass",
+    "invalid_inertia",
+    "nonfinite_state",
+    "zero_quaternion",
+    "decreasing_times",
+    "nonfinite_times",
+    "invalid_shape",
+    "invalid_force",
+    "invalid_joint",
+    "invalid_floor_height",
+    "invalid_tolerances",
+    "invalid_restitution",
+    "invalid_friction",
+    "starts_below_floor",
+)
+
+
+def _simulate_checked(spec, progress=False):
+    """`_simulate` with `throw=False`; bad input the library finds, as a `ValueError` or as
+    one of its input result codes, becomes a CLIError naming the scene."""
+    import jaxrb
+
+    try:
+        traj = _simulate(spec, progress=progress, throw=False)
+    except ValueError as e:
+        raise CLIError(f"{spec.source}: {one_line(e)}") from None
+    for name in _INPUT_RESULTS:
+        code = getattr(jaxrb.RESULTS, name, None)
+        if code is not None and bool(np.all(np.asarray(traj.result == code))):
+            raise CLIError(f"{spec.source}: {_result_name(traj.result)}")
+    return traj
+
+
+def _nonfinite(ts, arrays: dict) -> str | None:
+    """The earliest non-finite value among `arrays` (one leading index per save time `ts`,
+    s), described, or None when all are finite."""
+    first = None
+    for key, values in arrays.items():
+        values = np.asarray(values, dtype=float).reshape(len(ts), -1)
+        bad = ~np.all(np.isfinite(values), axis=1)
+        if bad.any() and (first is None or np.argmax(bad) < first[0]):
+            k = int(np.argmax(bad))
+            first = (k, key, values[k][~np.isfinite(values[k])][0])
+    if first is None:
+        return None
+    k, key, value = first
+    return f"{key} became {value} at t = {float(ts[k]):.6g} s"
 
 
 def _simulate(spec, progress=False, throw=True):
@@ -153,6 +230,12 @@ def _metrics(traj, scene) -> dict:
     }
 
 
+def _printable(name) -> str:
+    """A file name from the command line as printable text (bytes that are not UTF-8, kept
+    by Python as lone surrogates, shown as U+FFFD)."""
+    return str(name).encode("utf-8", "surrogateescape").decode("utf-8", "replace")
+
+
 def _result_name(result) -> str:
     import jaxrb
 
@@ -188,65 +271,127 @@ def _run_outputs(scene, args) -> list[str]:
 
 def _scene_text(path: Path, t_end) -> str:
     """The scene file's text as run: with `[simulation].t_end` set to `--t-end` if given."""
-    from ._scene_file import with_t_end
+    from ._scene_file import read_scene_text, with_t_end
 
-    text = path.read_text(encoding="utf-8")
+    text = read_scene_text(path)
     return text if t_end is None else with_t_end(text, t_end, str(path))
+
+
+def _run_times(spec, t_end) -> np.ndarray:
+    """The save times (s) of `jaxrb run --t-end T`: the scene's number of saves up to T."""
+    from ._scene_file import check_time_span
+
+    if not math.isfinite(t_end):
+        raise CLIError(f"--t-end must be a finite number of seconds, got {t_end}")
+    try:
+        check_time_span(float(spec.ts[0]), t_end)
+    except ValueError as e:
+        raise CLIError(f"--t-end {t_end:g}: {e}") from None
+    return np.linspace(spec.ts[0], t_end, spec.ts.size)
+
+
+MAX_TITLE_CHARS = 200
+"""The longest scene title `jaxrb run` draws on its plots (characters)."""
+
+
+def _check_title(spec) -> None:
+    """Refuse a title that matplotlib cannot draw (its mathtext, between `$` signs) or that
+    is too long for a plot, before the simulation rather than at the first plot."""
+    if not spec.title:
+        return
+    if len(spec.title) > MAX_TITLE_CHARS:
+        raise CLIError(
+            f"{spec.source}: title: {len(spec.title)} characters: a plot title has at most "
+            f"{MAX_TITLE_CHARS} (put the rest in `description`, or use --no-plots)"
+        )
+    import io
+
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(4.0, 3.0))
+    fig.add_subplot().set_title(spec.title)
+    try:
+        fig.savefig(io.BytesIO(), format="png", dpi=20, bbox_inches="tight")
+    except Exception as e:  # mathtext's parse errors, an image too large to make, ...
+        lines = [line.strip() for line in str(e).splitlines() if line.strip()]
+        reason = lines[-1] if lines else type(e).__name__
+        raise CLIError(
+            f"{spec.source}: title: matplotlib cannot draw it ({reason}); "
+            "write a literal dollar sign as \\\\$ in the TOML string"
+        ) from None
 
 
 def cmd_run(args) -> int:
     spec, path = _load(args.scene)
     if args.t_end is not None:
-        if args.t_end <= spec.ts[0]:
-            raise CLIError(
-                f"--t-end must be greater than the start time {spec.ts[0]}, got {args.t_end}"
-            )
-        spec.ts = np.linspace(spec.ts[0], args.t_end, spec.ts.size)
+        spec.ts = _run_times(spec, args.t_end)
     scene_text = _scene_text(path, args.t_end)
-    outdir = Path(args.output)
-    _outputs_free(outdir, _run_outputs(spec.scene, args), args.force)
-    label = "built-in default scene" if args.scene is None else str(args.scene)
+    if not args.no_plots or args.animate:
+        _check_title(spec)
+    label = "built-in default scene" if args.scene is None else _printable(args.scene)
     say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
-    say(
-        f"jaxrb run: {spec.title or label} ({label}); "
-        f"integrating t = {spec.ts[0]:g} .. {spec.ts[-1]:g} s ..."
-    )
-    t0 = time.perf_counter()
-    traj = _simulate(spec, progress=args.progress, throw=False)
-    traj.ts.block_until_ready()
-    wall = time.perf_counter() - t0
-    m = _metrics(traj, spec.scene)
-    if m["result"] != "successful":
-        print(
-            f"jaxrb run: simulation failed: {m['result']}\n  (try smaller rtol/atol or larger "
-            "max_steps in [simulation]); nothing written",
-            file=sys.stderr,
+    with StagedOutput(args.output, _run_outputs(spec.scene, args), args.force) as out:
+        say(
+            f"jaxrb run: {spec.title or label} ({label}); "
+            f"integrating t = {spec.ts[0]:g} .. {spec.ts[-1]:g} s ..."
         )
-        return 1
-    from ._trajectory_files import file_arrays, write_trajectory
+        t0 = time.perf_counter()
+        traj = _simulate_checked(spec, progress=args.progress)
+        traj.ts.block_until_ready()
+        wall = time.perf_counter() - t0
+        from ._trajectory_files import file_arrays
 
-    arrays = file_arrays(traj, spec.scene)
+        m = _metrics(traj, spec.scene)
+        arrays = file_arrays(traj, spec.scene) if m["result"] == "successful" else None
+        failure = _run_failure(m, arrays)
+        if failure is not None:
+            print(f"jaxrb run: simulation failed: {failure}; nothing written", file=sys.stderr)
+            return 1
+        try:
+            written = _write_run(args, spec, traj, arrays, scene_text, out.path, say)
+            rows = _run_summary(spec, label, traj, m, arrays, wall)
+            listing = ", ".join([*written, "summary.txt"])
+            rows.append(("output", f"{_printable(args.output)}/ ({listing})"))
+            text = _table(rows, header=("quantity", "value"), right=False)
+            (out.path / "summary.txt").write_text(text + "\n", encoding="utf-8")
+        except OSError as e:
+            raise CLIError(f"{args.output}: cannot write: {e.strerror or e}") from None
+        out.commit()
+    print(text)
+    return 0
+
+
+def _run_failure(m, arrays) -> str | None:
+    """Why a run failed (the solver's result, or a value that overflowed), or None."""
+    if m["result"] != "successful":
+        return (
+            f"{m['result'].rstrip('.')}; try smaller rtol/atol or larger max_steps in [simulation]"
+        )
+    per_save = {k: v for k, v in arrays.items() if not k.startswith("impact_")}
+    problem = _nonfinite(arrays["t"], per_save)
+    return None if problem is None else f"{problem} (the motion overflowed)"
+
+
+def _write_run(args, spec, traj, arrays, scene_text, outdir: Path, say) -> list[str]:
+    """Write the files of `jaxrb run` but the summary into `outdir`; returns their names."""
+    from ._trajectory_files import write_trajectory
+
     written = write_trajectory(arrays, outdir)
     (outdir / "scene.toml").write_text(scene_text, encoding="utf-8")
     written.append("scene.toml")
+    title = spec.title or None
     if not args.no_plots:
         say("writing plots ...")
         from . import plotting
 
-        for p in plotting.save_run_plots(traj, spec.scene, outdir, title=spec.title or None):
-            written.append(p.name)
+        written += [p.name for p in plotting.save_run_plots(traj, spec.scene, outdir, title=title)]
     if args.animate:
         say("writing animation.gif ...")
         from . import plotting
 
-        plotting.animate(traj, spec.scene, outdir / "animation.gif", title=spec.title or None)
+        plotting.animate(traj, spec.scene, outdir / "animation.gif", title=title)
         written.append("animation.gif")
-    rows = _run_summary(spec, label, traj, m, arrays, wall)
-    rows.append(("output", f"{outdir}/ ({', '.join([*written, 'summary.txt'])})"))
-    text = _table(rows, header=("quantity", "value"), right=False)
-    (outdir / "summary.txt").write_text(text + "\n", encoding="utf-8")
-    print(text)
-    return 0
+    return written
 
 
 def _run_summary(spec, label, traj, m, arrays, wall) -> list[tuple[str, str]]:
@@ -323,31 +468,47 @@ def _reaction_rows(spec, arrays) -> list[tuple[str, str]]:
 # sweep
 
 
+def _grid_number(where: str, text: str) -> float:
+    """One number of a --param grid; a CLIError unless it is a finite number."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise CLIError(f"{where}: {text.strip()!r} is not a number") from None
+    if not math.isfinite(value):
+        raise CLIError(f"{where}: {text.strip()!r} is not a finite number")
+    return value
+
+
 def _parse_param(text: str):
+    """PATH and its values from `-p PATH=START:STOP:NUM` or `-p PATH=V1,V2,...`."""
     if "=" not in text:
         raise CLIError(f"--param {text!r}: expected PATH=START:STOP:NUM or PATH=V1,V2,...")
     name, spec = (x.strip() for x in text.split("=", 1))
+    where = f"--param {text!r}"
     if not name:
-        raise CLIError(f"--param {text!r}: empty PATH")
-    try:
-        if ":" in spec:
-            parts = spec.split(":")
-            if len(parts) != 3:
-                raise ValueError
-            start, stop, num = float(parts[0]), float(parts[1]), int(parts[2])
-            if num < 1:
-                raise ValueError
-            values = list(np.linspace(start, stop, num))
-        else:
-            values = [float(v) for v in spec.split(",") if v.strip()]
-            if not values:
-                raise ValueError
-    except ValueError:
-        raise CLIError(
-            f"--param {text!r}: values must be START:STOP:NUM (NUM an integer >= 1) "
-            "or numbers V1,V2,..."
-        ) from None
-    return name, [float(v) for v in values]
+        raise CLIError(f"{where}: empty PATH")
+    if ":" in spec:
+        parts = spec.split(":")
+        if len(parts) != 3:
+            raise CLIError(f"{where}: expected START:STOP:NUM (three parts), got {spec!r}")
+        start, stop = (_grid_number(where, p) for p in parts[:2])
+        try:
+            num = int(parts[2])
+        except ValueError:
+            num = 0
+        if num < 1:
+            raise CLIError(f"{where}: NUM must be an integer >= 1, got {parts[2].strip()!r}")
+        if num > MAX_SWEEP_RUNS:
+            raise CLIError(f"{where}: NUM = {num}: a sweep has at most {MAX_SWEEP_RUNS} runs")
+        with np.errstate(all="ignore"):
+            values = np.linspace(start, stop, num).tolist()
+        if not all(math.isfinite(v) for v in values):
+            raise CLIError(f"{where}: STOP - START overflows")
+    else:
+        values = [_grid_number(where, v) for v in spec.split(",") if v.strip()]
+        if not values:
+            raise CLIError(f"{where}: no values: expected START:STOP:NUM or V1,V2,...")
+    return name, values
 
 
 def _set_path(data: dict, dotted: str, value):
@@ -397,9 +558,10 @@ def cmd_sweep(args) -> int:
     names = [n for n, _ in params]
     if len(set(names)) != len(names):
         raise CLIError("each --param PATH may be given once")
+    runs = math.prod(len(v) for _, v in params)
+    if runs > MAX_SWEEP_RUNS:
+        raise CLIError(f"the grid has {runs} points: a sweep has at most {MAX_SWEEP_RUNS} runs")
     grid = list(itertools.product(*[v for _, v in params]))
-    outdir = Path(args.output)
-    _outputs_free(outdir, ["sweep.csv"], args.force)
     # validate every grid point first: a bad value fails before any simulation runs
     specs = []
     for point in grid:
@@ -408,16 +570,55 @@ def cmd_sweep(args) -> int:
             _set_path(data, name, value)
         where = ", ".join(f"{n}={v:g}" for n, v in zip(names, point, strict=True))
         specs.append(parse_scene(data, source=f"{path} with {where}"))
-    rows = []
-    t0 = time.perf_counter()
-    bar = tqdm(specs, desc="jaxrb sweep", unit="run", disable=not args.progress, file=sys.stderr)
-    for point, spec in zip(grid, bar, strict=True):
-        traj = _simulate(spec, throw=False)
-        rows.append({**dict(zip(names, point, strict=True)), **_metrics(traj, spec.scene)})
-    wall = time.perf_counter() - t0
-    header = list(rows[0])
-    with open(outdir / "sweep.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=header)
+    outdir = Path(args.output)
+    with StagedOutput(args.output, ["sweep.csv"], args.force) as out:
+        rows = []
+        t0 = time.perf_counter()
+        bar = tqdm(
+            specs, desc="jaxrb sweep", unit="run", disable=not args.progress, file=sys.stderr
+        )
+        for point, spec in zip(grid, bar, strict=True):
+            rows.append({**dict(zip(names, point, strict=True)), **_sweep_metrics(spec)})
+        wall = time.perf_counter() - t0
+        try:
+            _write_sweep(rows, out.path / "sweep.csv")
+        except OSError as e:
+            raise CLIError(f"{outdir}: cannot write: {e.strerror or e}") from None
+        out.commit()
+    show = names + ["result", "final_z", "final_speed", "energy_lost", "impacts", "steps"]
+    body = [
+        [_fmt(r[k], 5) if not isinstance(r[k], str) else r[k] for k in show]
+        for r in rows[: args.show]
+    ]
+    print(_table(body, header=show))
+    if len(rows) > args.show:
+        print(f"... {len(rows) - args.show} more rows in {_printable(outdir / 'sweep.csv')}")
+    failed = sum(r["result"] != "successful" for r in rows)
+    results = _printable(outdir / "sweep.csv")
+    print(f"{len(rows)} runs in {wall:.2f} s ({failed} failed); results: {results}")
+    return 0
+
+
+def _sweep_metrics(spec) -> dict:
+    """`_metrics` of one grid point's run; a motion that overflowed is a failed result."""
+    import jaxrb
+
+    traj = _simulate_checked(spec)
+    metrics = _metrics(traj, spec.scene)
+    if metrics["result"] == "successful":
+        s = traj.states
+        energy = jaxrb.energy(spec.scene, s)
+        arrays = {"pos": s.pos, "quat": s.quat, "vel": s.vel, "omega": s.omega, "energy": energy}
+        problem = _nonfinite(np.asarray(traj.ts), arrays)
+        if problem is not None:
+            metrics["result"] = f"failed: {problem}"
+    return metrics
+
+
+def _write_sweep(rows: list[dict], path: Path) -> None:
+    """`sweep.csv`: a header of the row keys, then one line per run."""
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         for r in rows:
             w.writerow(
@@ -426,17 +627,6 @@ def cmd_sweep(args) -> int:
                     for k, v in r.items()
                 }
             )
-    show = names + ["result", "final_z", "final_speed", "energy_lost", "impacts", "steps"]
-    body = [
-        [_fmt(r[k], 5) if not isinstance(r[k], str) else r[k] for k in show]
-        for r in rows[: args.show]
-    ]
-    print(_table(body, header=show))
-    if len(rows) > args.show:
-        print(f"... {len(rows) - args.show} more rows in {outdir / 'sweep.csv'}")
-    failed = sum(r["result"] != "successful" for r in rows)
-    print(f"{len(rows)} runs in {wall:.2f} s ({failed} failed); results: {outdir / 'sweep.csv'}")
-    return 0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -491,10 +681,17 @@ def _add_common(p, output=True):
     )
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line on stderr (no usage block), status 2."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {one_line(message)} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     import jaxrb
 
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="jaxrb",
         description="jaxrb: JAX-accelerated, differentiable rigid-body dynamics. "
         "Simulate a scene file, sweep parameters, fit parameters to data, benchmark.",
@@ -572,27 +769,83 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _run_or_sweep(args) -> int:
+    """`jaxrb run` / `jaxrb sweep`: every failure is one line on stderr, never a traceback:
+    exit status 2 for bad input (scene file, option, output path), 1 for a failed simulation
+    or an unexpected error. Warnings are one line each."""
+    import warnings
+
+    from ._scene_file import SceneFileError
+
+    name = args.command
+
+    def one_line_warning(message, category, filename, lineno, file=None, line=None):
+        print(f"jaxrb {name}: warning: {one_line(message)}", file=sys.stderr)
+
+    try:
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.showwarning = one_line_warning
+            if name == "run" and args.list:
+                return _list_examples()
+            if name == "run" and (args.show or args.show_default):
+                return _show(args)
+            import jax
+
+            jax.config.update("jax_enable_x64", True)
+            return args.func(args)
+    except (CLIError, SceneFileError) as e:
+        print(f"jaxrb {name}: error: {one_line(e)}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"jaxrb {name}: interrupted; nothing written", file=sys.stderr)
+        return 130
+    except BrokenPipeError:  # stdout closed early (`jaxrb run | head`): the files are written
+        print(f"jaxrb {name}: error: standard output closed early", file=sys.stderr)
+        return 1
+    except MemoryError:
+        print(
+            f"jaxrb {name}: error: out of memory (fewer saves or grid points may fit); "
+            "nothing written",
+            file=sys.stderr,
+        )
+        return 1
+    except Exception as e:  # a bug: still one line, and no partial output
+        print(
+            f"jaxrb {name}: error: unexpected {type(e).__name__}: {one_line(e)} "
+            "(please report this); nothing written",
+            file=sys.stderr,
+        )
+        return 1
+
+
+def _subparsers(parser) -> dict:
+    """The parsers of the commands (run, sweep, ...) of `parser`, by name."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            return dict(action.choices)
+    return {}
+
+
 def main(argv=None) -> int:
-    """Entry point of the `jaxrb` console script (and `python -m jaxrb`); returns the exit code."""
+    """Entry point of the `jaxrb` console script (and `python -m jaxrb`); returns the exit code
+    (`--help` and `--version` exit through SystemExit, status 0)."""
     parser = build_parser()
-    args, unknown = parser.parse_known_args(argv)
-    if args.command == "bench":  # everything after `bench` belongs to the report script
-        args.bench_args = [*unknown, *args.bench_args]
-    elif unknown:
-        parser.error(f"unrecognized arguments: {' '.join(unknown)}")
+    try:
+        args, unknown = parser.parse_known_args(argv)
+        if args.command == "bench":  # everything after `bench` belongs to the report script
+            args.bench_args = [*unknown, *args.bench_args]
+        elif unknown:
+            command = _subparsers(parser).get(args.command, parser)
+            command.error(f"unrecognized arguments: {' '.join(unknown)}")
+    except SystemExit as e:
+        if not e.code:
+            raise
+        return e.code
     if args.command is None:
         parser.print_help()
         return 2
-    if args.command == "run" and args.list:
-        return _list_examples()
-    if args.command == "run" and (args.show or args.show_default):
-        try:
-            path = _scene_path(None if args.show_default else args.scene)
-        except CLIError as e:
-            print(f"jaxrb run: error: {e}", file=sys.stderr)
-            return 2
-        print(path.read_text(encoding="utf-8"), end="")
-        return 0
+    if args.command in ("run", "sweep"):
+        return _run_or_sweep(args)
     import jax
 
     jax.config.update("jax_enable_x64", True)

@@ -26,6 +26,11 @@ The format is documented, field by field, in the annotated example shipped with 
   is an error naming the field.
 - `[simulation]`: `t_end` (s, required), `t_start`, `num_saves`, `rtol`, `atol`,
   `max_steps`, `solver` ("tsit5", "dopri5", "dopri8").
+
+Beyond each field's own checks, a scene is refused when its initial energy overflows, when
+the body starts below the floor, and when its saves would make more than `MAX_OUTPUT_BYTES`
+of output arrays. The model classes (`RigidBody`, the shapes, forces, joints and `Floor`)
+check their own parameters; their `ValueError`s become `SceneFileError`s naming the table.
 """
 
 from __future__ import annotations
@@ -43,14 +48,27 @@ import numpy as np
 from ._scene_examples import example_path
 
 __all__ = [
+    "MAX_OUTPUT_BYTES",
     "SceneFileError",
     "SceneSpec",
     "default_scene_path",
     "load_scene",
     "loads_scene",
     "parse_scene",
+    "read_scene_text",
+    "check_time_span",
     "with_t_end",
 ]
+
+MAX_SCENE_BYTES = 1_000_000
+"""The largest scene file read (bytes); a scene file is a page of TOML."""
+
+MAX_OUTPUT_BYTES = 1e9
+"""The most output arrays a scene's saves may make (bytes of float64 in `trajectory.npz`;
+the CSV copy is about twice as large, and both are held in memory while written)."""
+
+MAX_STEPS_LIMIT = 10**12
+"""The largest `[simulation].max_steps` accepted."""
 
 
 class SceneFileError(ValueError):
@@ -88,16 +106,34 @@ def default_scene_path() -> Path:
     return example_path("die")
 
 
-def load_scene(path) -> SceneSpec:
-    """Read and validate a TOML scene file; raises `SceneFileError` naming field and problem."""
+def read_scene_text(path) -> str:
+    """The text of a scene file (UTF-8, a byte-order mark allowed); raises `SceneFileError`
+    for a missing, unreadable, binary or oversized (> `MAX_SCENE_BYTES`) file."""
     path = Path(path)
+    if path.is_dir():
+        raise SceneFileError(f"{path}: is a directory, not a scene file")
     try:
-        text = path.read_text(encoding="utf-8")
+        with open(path, "rb") as f:
+            raw = f.read(MAX_SCENE_BYTES + 1)
     except FileNotFoundError:
         raise SceneFileError(f"{path}: no such scene file") from None
     except OSError as e:
-        raise SceneFileError(f"{path}: cannot read: {e}") from None
-    return loads_scene(text, source=str(path))
+        raise SceneFileError(f"{path}: cannot read: {e.strerror or e}") from None
+    if len(raw) > MAX_SCENE_BYTES:
+        raise SceneFileError(
+            f"{path}: larger than {MAX_SCENE_BYTES // 1000} kB: not a scene file (TOML text)"
+        )
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        raise SceneFileError(
+            f"{path}: not a text file: byte {e.start} is not UTF-8 (a scene file is TOML text)"
+        ) from None
+
+
+def load_scene(path) -> SceneSpec:
+    """Read and validate a TOML scene file; raises `SceneFileError` naming field and problem."""
+    return loads_scene(read_scene_text(path), source=str(path))
 
 
 def loads_scene(text: str, source: str = "<scene>") -> SceneSpec:
@@ -106,6 +142,13 @@ def loads_scene(text: str, source: str = "<scene>") -> SceneSpec:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise SceneFileError(f"{source}: not valid TOML: {e}") from None
+    except RecursionError:
+        raise SceneFileError(f"{source}: not valid TOML: nested too deeply") from None
+    if not data:
+        raise SceneFileError(
+            f"{source}: empty scene: expected at least [body] and [simulation] "
+            "(the format: jaxrb run --show-default)"
+        )
     return parse_scene(data, source=source)
 
 
@@ -136,7 +179,14 @@ class _Table:
             field = self.where
         else:
             field = f"{self.where}.{key}" if self.where else _TOP_NAMES.get(key, key)
-        raise SceneFileError(f"{self.source}: {field}: {problem}")
+        raise SceneFileError(f"{self.source}: {field + ': ' if field else ''}{problem}")
+
+    def model(self, key, make, *args, **kwargs):
+        """`make(*args, **kwargs)` (a jaxrb model class); its `ValueError` names `key`."""
+        try:
+            return make(*args, **kwargs)
+        except ValueError as e:
+            self.fail(key, " ".join(str(e).split()))
 
     def has(self, key):
         return key in self.data
@@ -148,10 +198,10 @@ class _Table:
             return default
         value = self.data[key]
         if isinstance(value, bool) or not isinstance(value, int | float):
-            self.fail(key, f"must be a number, got {_type_name(value)} {value!r}")
+            self.fail(key, f"must be a number, got {_type_name(value)} {_short(value)}")
+        if not math.isfinite(_float(value)):
+            self.fail(key, f"must be finite, got {_short(value)}")
         value = float(value)
-        if not math.isfinite(value):
-            self.fail(key, f"must be finite, got {value}")
         if positive and value <= 0:
             self.fail(key, f"must be > 0, got {value}")
         if nonnegative and value < 0:
@@ -160,16 +210,18 @@ class _Table:
             self.fail(key, f"must be in [{lo}, {hi}], got {value}")
         return value
 
-    def integer(self, key, default=_MISSING, *, minimum=None):
+    def integer(self, key, default=_MISSING, *, minimum=None, maximum=None):
         if key not in self.data:
             if default is _MISSING:
                 self.fail(key, "missing required field")
             return default
         value = self.data[key]
         if isinstance(value, bool) or not isinstance(value, int):
-            self.fail(key, f"must be an integer, got {_type_name(value)} {value!r}")
+            self.fail(key, f"must be an integer, got {_type_name(value)} {_short(value)}")
         if minimum is not None and value < minimum:
-            self.fail(key, f"must be >= {minimum}, got {value}")
+            self.fail(key, f"must be >= {minimum}, got {_short(value)}")
+        if maximum is not None and value > maximum:
+            self.fail(key, f"must be <= {maximum}, got {_short(value)}")
         return value
 
     def string(self, key, default=_MISSING, *, choices=None):
@@ -179,11 +231,13 @@ class _Table:
             return default
         value = self.data[key]
         if not isinstance(value, str):
-            self.fail(key, f"must be a string, got {_type_name(value)} {value!r}")
+            self.fail(key, f"must be a string, got {_type_name(value)} {_short(value)}")
         if choices is not None and value not in choices:
             close = difflib.get_close_matches(value, choices, n=1)
             hint = f" (did you mean {close[0]!r}?)" if close else ""
-            self.fail(key, f"unknown value {value!r}{hint}; choose one of: {', '.join(choices)}")
+            self.fail(
+                key, f"unknown value {_short(value)}{hint}; choose one of: {', '.join(choices)}"
+            )
         return value
 
     def vector(self, key, n=3, default=_MISSING):
@@ -193,12 +247,14 @@ class _Table:
             return None if default is None else np.asarray(default, dtype=float)
         value = self.data[key]
         if not isinstance(value, list) or len(value) != n:
-            self.fail(key, f"must be a list of {n} numbers, got {_type_name(value)} {value!r}")
+            self.fail(
+                key, f"must be a list of {n} numbers, got {_type_name(value)} {_short(value)}"
+            )
         for i, x in enumerate(value):
             if isinstance(x, bool) or not isinstance(x, int | float):
-                self.fail(key, f"element {i} must be a number, got {_type_name(x)} {x!r}")
-            if not math.isfinite(x):
-                self.fail(key, f"element {i} must be finite, got {x}")
+                self.fail(key, f"element {i} must be a number, got {_type_name(x)} {_short(x)}")
+            if not math.isfinite(_float(x)):
+                self.fail(key, f"element {i} must be finite, got {_short(x)}")
         return np.asarray(value, dtype=float)
 
     def table(self, key, known, default=_MISSING):
@@ -209,6 +265,30 @@ class _Table:
         return _Table(
             self.data[key], f"{self.where}.{key}" if self.where else f"[{key}]", self.source, known
         )
+
+
+def _float(value: int | float) -> float:
+    """`value` as a float; inf for an integer too large for one."""
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf if value > 0 else -math.inf
+
+
+def _short(value, limit=60) -> str:
+    """`repr(value)`, cut to `limit` characters (a message stays one readable line)."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _unit(vector):
+    """`vector` divided by its length, computed without overflow; None for the zero vector."""
+    v = np.asarray(vector, dtype=float)
+    scale = np.max(np.abs(v))
+    if scale == 0:
+        return None
+    v = v / scale
+    return v / np.linalg.norm(v)
 
 
 def _type_name(value) -> str:
@@ -239,6 +319,7 @@ def _shape(body: _Table):
         return None
     raw = body.data["shape"]
     kind = raw.get("type") if isinstance(raw, dict) else None
+    kind = kind if isinstance(kind, str) else None
     known = {
         "box": ("type", "half_extents"),
         "sphere": ("type", "radius"),
@@ -255,10 +336,11 @@ def _shape(body: _Table):
         half = t.vector("half_extents")
         if np.any(half <= 0):
             t.fail("half_extents", f"must all be > 0, got {half.tolist()}")
-        return jaxrb.Box(half)
+        return t.model(None, jaxrb.Box, half)
     if kind == "sphere":
-        return jaxrb.Sphere(t.number("radius", positive=True))
-    return jaxrb.Cylinder(t.number("radius", positive=True), t.number("half_height", positive=True))
+        return t.model(None, jaxrb.Sphere, t.number("radius", positive=True))
+    radius, half_height = t.number("radius", positive=True), t.number("half_height", positive=True)
+    return t.model(None, jaxrb.Cylinder, radius, half_height)
 
 
 def _body(root: _Table):
@@ -285,10 +367,9 @@ def _body(root: _Table):
                 )
     elif shape is None:
         body.fail("inertia", "missing: give `inertia` or a [body.shape] to compute it from")
-    try:
-        return jaxrb.RigidBody(mass, inertia, shape=shape)
-    except ValueError as e:
-        body.fail("inertia", str(e))
+    # without `inertia`, the shape and the mass give it: a bad one is the shape's
+    key = "inertia" if inertia is not None else "shape"
+    return body.model(key, jaxrb.RigidBody, mass, inertia, shape=shape)
 
 
 def _euler_quat(angles_rad, sequence):
@@ -321,17 +402,15 @@ def _initial(root: _Table):
         init.fail(given[1], f"give the attitude once: `{given[0]}` is already set")
     quat = np.array([1.0, 0.0, 0.0, 0.0])
     if init.has("quat"):
-        quat = init.vector("quat", 4)
-        norm = np.linalg.norm(quat)
-        if norm == 0:
+        quat = _unit(init.vector("quat", 4))
+        if quat is None:
             init.fail("quat", "must not be zero")
-        quat = quat / norm
     elif init.has("axis"):
-        axis = init.vector("axis")
-        if np.linalg.norm(axis) == 0:
+        axis = _unit(init.vector("axis"))
+        if axis is None:
             init.fail("axis", "must not be the zero vector")
         angle = math.radians(init.number("angle_deg"))
-        quat = np.asarray(jaxrb.axis_angle_to_quat(axis / np.linalg.norm(axis), angle))
+        quat = np.asarray(jaxrb.axis_angle_to_quat(axis, angle))
     elif init.has("euler_deg"):
         angles = np.radians(init.vector("euler_deg"))
         quat = _euler_quat(angles, init.string("sequence", choices=_SEQUENCES))
@@ -339,13 +418,65 @@ def _initial(root: _Table):
         for k in ("angle_deg", "sequence"):
             if init.has(k):
                 init.fail(k, "given without `axis` / `euler_deg`")
-    state = jaxrb.make_state(
+    state = init.model(
+        None,
+        jaxrb.make_state,
         pos=init.vector("pos", default=(0.0, 0.0, 0.0)),
         quat=quat,
         vel=init.vector("vel", default=(0.0, 0.0, 0.0)),
         omega=init.vector("omega", default=(0.0, 0.0, 0.0)),
     )
     return state, init
+
+
+def _initial_energy(root: _Table, init: _Table | None, scene, state0):
+    """Refuse an initial state whose energy (J) overflows, naming the part that does:
+    1/2 m vel.vel (`vel`), 1/2 omega.J omega (`omega`), else the potential (`pos`)."""
+    import jaxrb
+
+    with np.errstate(all="ignore"):
+        total = float(jaxrb.energy(scene, state0))
+        if math.isfinite(total):
+            return
+        mass = float(scene.body.mass)
+        vel, omega = (np.asarray(x, dtype=float) for x in (state0.vel, state0.omega))
+        inertia = np.asarray(scene.body.inertia_matrix, dtype=float)
+        translational = 0.5 * mass * float(vel @ vel)
+        rotational = 0.5 * float(omega @ inertia @ omega)
+    if not math.isfinite(translational):
+        key, part = "vel", f"the kinetic energy 1/2 m |vel|^2 is {translational} J"
+    elif not math.isfinite(rotational):
+        key, part = "omega", f"the kinetic energy 1/2 omega.J omega is {rotational} J"
+    else:
+        key, part = "pos", f"the potential energy is {total} J"
+    problem = f"{part} (mass {mass:g} kg): too large to simulate"
+    if init is None:
+        root.fail("initial", problem)
+    init.fail(key, problem)
+
+
+def _above_floor(root: _Table, init: _Table | None, scene, state0):
+    """Refuse a body that starts below the floor (its lowest point more than the contact
+    tolerance under the plane z = height, m)."""
+    import jaxrb
+    from jaxrb.contact import ContactOptions
+
+    if scene.floor is None:
+        return
+    height = float(scene.floor.height)
+    quat = jaxrb.quat_normalize(state0.quat)
+    with np.errstate(all="ignore"):
+        gap = float(scene.body.shape.floor_distance(state0.pos, quat, height))
+    tolerance = ContactOptions().resolved(state0.pos.dtype).contact
+    if not gap < -tolerance:
+        return
+    problem = (
+        f"the body starts below the [floor]: its lowest point is {-gap:.3g} m under the "
+        f"plane z = {height:g} m (raise pos[2] or lower [floor].height)"
+    )
+    if init is None or not init.has("pos"):
+        root.fail("initial", problem)
+    init.fail("pos", problem)
 
 
 def _joint_motion(init: _Table | None, joint, state0):
@@ -411,9 +542,9 @@ def _force(raw, where, source):
         )
     f = _Table(raw, where, source, _FORCES[kind])
     if kind == "gravity":
-        return jaxrb.Gravity(f.vector("g", default=(0.0, 0.0, -9.81)))
+        return f.model(None, jaxrb.Gravity, f.vector("g", default=(0.0, 0.0, -9.81)))
     if kind == "linear_drag":
-        return jaxrb.LinearDrag(f.number("coefficient", nonnegative=True))
+        return f.model(None, jaxrb.LinearDrag, f.number("coefficient", nonnegative=True))
     if kind == "quadratic_drag":
         if f.has("coefficient"):
             for k in ("rho", "drag_coefficient", "area"):
@@ -423,22 +554,29 @@ def _force(raw, where, source):
                         "give either `coefficient` or (`rho`, `drag_coefficient`, `area`), "
                         "not both",
                     )
-            return jaxrb.QuadraticDrag(f.number("coefficient", nonnegative=True))
+            return f.model(None, jaxrb.QuadraticDrag, f.number("coefficient", nonnegative=True))
         if not f.has("area"):
             f.fail(
                 "coefficient",
                 "missing: give `coefficient` (kg/m) or `area` (m^2) with `rho`, `drag_coefficient`",
             )
-        return jaxrb.QuadraticDrag.from_air(
+        return f.model(
+            None,
+            jaxrb.QuadraticDrag.from_air,
             f.number("rho", 1.225, nonnegative=True),
             f.number("drag_coefficient", 1.0, nonnegative=True),
             f.number("area", nonnegative=True),
         )
     if kind == "damping_moment":
-        return jaxrb.DampingMoment(
-            f.number("linear", 0.0, nonnegative=True), f.number("quadratic", 0.0, nonnegative=True)
+        return f.model(
+            None,
+            jaxrb.DampingMoment,
+            f.number("linear", 0.0, nonnegative=True),
+            f.number("quadratic", 0.0, nonnegative=True),
         )
-    return jaxrb.Wrench(
+    return f.model(
+        None,
+        jaxrb.Wrench,
         force=f.vector("force", default=None),
         torque=f.vector("torque", default=None),
         point=f.vector("point", default=None),
@@ -459,7 +597,9 @@ def _floor(root: _Table):
     floor = root.table("floor", ("restitution", "friction", "height"), default=None)
     if floor is None:
         return None
-    return jaxrb.Floor(
+    return floor.model(
+        None,
+        jaxrb.Floor,
         floor.number("restitution", lo=0.0, hi=1.0),
         floor.number("friction", 0.0, nonnegative=True),
         floor.number("height", 0.0),
@@ -477,11 +617,11 @@ def _joint(root: _Table):
     if kind == "pivot":
         if joint.has("axis"):
             joint.fail("axis", 'a pivot has no axis (use type = "hinge")')
-        return jaxrb.Pivot(point)
-    axis = joint.vector("axis")
-    if np.linalg.norm(axis) == 0:
+        return joint.model(None, jaxrb.Pivot, point)
+    axis = _unit(joint.vector("axis"))
+    if axis is None:
         joint.fail("axis", "must not be the zero vector")
-    return jaxrb.Hinge(point, axis)
+    return joint.model(None, jaxrb.Hinge, point, axis)
 
 
 def _simulation(root: _Table):
@@ -490,16 +630,43 @@ def _simulation(root: _Table):
     )
     t0 = sim.number("t_start", 0.0)
     t1 = sim.number("t_end")
-    if t1 <= t0:
-        sim.fail("t_end", f"must be greater than t_start = {t0}, got {t1}")
     n = sim.integer("num_saves", 201, minimum=2)
+    try:
+        check_time_span(t0, t1)
+    except ValueError as e:
+        sim.fail("t_end", str(e))
     options = {
         "rtol": sim.number("rtol", 1e-6, positive=True),
         "atol": sim.number("atol", 1e-6, positive=True),
-        "max_steps": sim.integer("max_steps", 100_000, minimum=1),
+        "max_steps": sim.integer("max_steps", 100_000, minimum=1, maximum=MAX_STEPS_LIMIT),
         "solver": sim.string("solver", "tsit5", choices=_SOLVERS),
     }
-    return np.linspace(t0, t1, n), options
+    return (t0, t1, n), options, sim
+
+
+def check_time_span(t_start: float, t_end: float) -> None:
+    """A ValueError (the problem with `t_end`) unless `t_start`, `t_end` (s) are finite,
+    `t_end` > `t_start` and `t_end - t_start` is finite."""
+    if not (math.isfinite(t_start) and math.isfinite(t_end)):
+        raise ValueError(f"must be finite, got t_start = {t_start}, t_end = {t_end}")
+    if t_end <= t_start:
+        raise ValueError(f"must be greater than t_start = {t_start}, got {t_end}")
+    if not math.isfinite(t_end - t_start):
+        raise ValueError(f"t_end - t_start overflows (t_start = {t_start}, t_end = {t_end})")
+
+
+def _output_size(sim: _Table, scene, num_saves: int):
+    """Refuse more saves than make `MAX_OUTPUT_BYTES` of output arrays."""
+    from ._trajectory_files import bytes_per_save
+
+    per_save = bytes_per_save(scene)
+    if num_saves * per_save > MAX_OUTPUT_BYTES:
+        sim.fail(
+            "num_saves",
+            f"{num_saves} saves would make {num_saves * per_save / 1e9:.3g} GB of output "
+            f"arrays ({per_save} bytes each); the limit is {MAX_OUTPUT_BYTES / 1e9:g} GB, "
+            f"at most {int(MAX_OUTPUT_BYTES // per_save)} saves",
+        )
 
 
 def parse_scene(data: dict, source: str = "<scene>") -> SceneSpec:
@@ -519,8 +686,12 @@ def parse_scene(data: dict, source: str = "<scene>") -> SceneSpec:
         root.fail("floor", "a scene with a floor needs a [body.shape] to find the contact point")
     state0, init = _initial(root)
     _joint_motion(init, joint, state0)
-    ts, options = _simulation(root)
-    scene = jaxrb.Scene(body, forces=forces, floor=floor, joint=joint)
+    (t0, t1, num_saves), options, sim = _simulation(root)
+    scene = root.model(None, jaxrb.Scene, body, forces=forces, floor=floor, joint=joint)
+    _initial_energy(root, init, scene, state0)
+    _above_floor(root, init, scene, state0)
+    _output_size(sim, scene, num_saves)
+    ts = np.linspace(t0, t1, num_saves)
     return SceneSpec(scene, state0, ts, options, title, description, data, source)
 
 

@@ -43,6 +43,23 @@ _CSV_JOINT_COMMENT = (
 )
 
 
+def file_keys(scene) -> list[str]:
+    """The per-save keys of `trajectory.npz` for `scene`, in file order."""
+    import jaxrb
+
+    keys = ["t", "pos", "quat", "vel", "omega", "energy"]
+    if scene.joint is not None:
+        keys += ["reaction", "reaction_magnitude"]
+    if isinstance(scene.joint, jaxrb.Hinge):
+        keys += ["joint_angle", "reaction_normal", "reaction_tangential", "reaction_axial"]
+    return [k for k in _COLUMNS if k in keys]
+
+
+def bytes_per_save(scene) -> int:
+    """Bytes of float64 that one save time adds to `trajectory.npz` for `scene`."""
+    return 8 * sum(len(_COLUMNS[k]) for k in file_keys(scene))
+
+
 def file_arrays(traj, scene) -> dict:
     """The arrays of `trajectory.npz` (numpy, one leading index per save time)."""
     import jaxrb
@@ -79,5 +96,5 @@ def write_trajectory(arrays: dict, outdir: Path) -> list[str]:
         f.write(comment + "\n")
         w = csv.writer(f)
         w.writerow(header)
-        w.writerows([[f"{v:.12g}" for v in row] for row in table])
+        w.writerows([f"{v:.12g}" for v in row] for row in table)
     return ["trajectory.npz", "trajectory.csv"]

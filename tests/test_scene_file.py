@@ -152,6 +152,52 @@ num_saves = 11
             "[simulation].t_end",
             "must be greater than t_start",
         ),
+        (
+            B + "[simulation]\nt_start = -1e308\nt_end = 1e308\n",
+            "[simulation].t_end",
+            "t_end - t_start overflows",
+        ),
+        (
+            B + S + "num_saves = 20000000\n",
+            "[simulation].num_saves",
+            "20000000 saves would make 2.4 GB of output arrays (120 bytes each); "
+            "the limit is 1 GB, at most 8333333 saves",
+        ),
+        (
+            B + S + "max_steps = 10000000000000\n",
+            "[simulation].max_steps",
+            "must be <= 1000000000000",
+        ),
+        # initial values whose energy overflows, a body below the floor
+        (
+            B + "[initial]\nvel = [1e200, 0, 0]\n" + S,
+            "[initial].vel",
+            "the kinetic energy 1/2 m |vel|^2 is inf J (mass 1 kg): too large to simulate",
+        ),
+        (
+            B + "[initial]\nomega = [0, 0, 1e200]\n" + S,
+            "[initial].omega",
+            "the kinetic energy 1/2 omega.J omega is inf J",
+        ),
+        (
+            B.replace("inertia = [1, 2, 3]", '[body.shape]\ntype = "sphere"\nradius = 0.5')
+            + "[floor]\nrestitution = 0.5\nheight = 0.2\n[initial]\npos = [0, 0, 0.5]\n"
+            + S,
+            "[initial].pos",
+            "the body starts below the [floor]: its lowest point is 0.2 m under the plane "
+            "z = 0.2 m",
+        ),
+        # an integer too large for a float, a shape whose inertia overflows
+        (
+            "[body]\nmass = 1" + "0" * 400 + "\ninertia = [1, 2, 3]\n" + S,
+            "[body].mass",
+            "must be finite, got 1000",
+        ),
+        (
+            '[body]\nmass = 1.0\n[body.shape]\ntype = "sphere"\nradius = 1e200\n' + S,
+            "[body].shape",
+            "inertia",
+        ),
         # unknown field (typo)
         (
             B + "shpe = 1\n" + S,
@@ -193,9 +239,40 @@ def test_invalid_files_name_field_and_problem(text, field, problem):
     assert problem in message, message
 
 
+def test_huge_attitude_vectors_are_normalised_without_overflow():
+    """A quaternion or axis of norm 1e308 (whose squared norm overflows) is a direction."""
+    base = MINIMAL + "[initial]\n"
+    q = loads_scene(base + "quat = [1e308, 1e308, 0, 0]\n").state0.quat
+    np.testing.assert_allclose(q, [2**-0.5, 2**-0.5, 0.0, 0.0], rtol=1e-15)
+    q_axis = loads_scene(base + "axis = [0, 0, 1e308]\nangle_deg = 90\n").state0.quat
+    np.testing.assert_allclose(q_axis, [2**-0.5, 0.0, 0.0, 2**-0.5], rtol=1e-15)
+    hinge = HINGE.replace("[0, 2, 0]", "[0, 1e308, 0]")
+    spec = loads_scene(B + hinge + S)
+    np.testing.assert_allclose(spec.scene.joint.axis, [0.0, 1.0, 0.0])
+
+
+def test_read_scene_text(tmp_path):
+    """UTF-8 with or without a byte-order mark; binary, oversized and directories refused."""
+    path = tmp_path / "s.toml"
+    path.write_bytes("\ufeff".encode() + MINIMAL.encode())
+    assert load_scene(path).ts.size == 201
+    path.write_bytes(b"\x00\xff")
+    with pytest.raises(SceneFileError, match=r"s.toml: not a text file: byte 1 is not UTF-8"):
+        load_scene(path)
+    path.write_bytes(b"#" * 2_000_000)
+    with pytest.raises(SceneFileError, match=r"s.toml: larger than 1000 kB"):
+        load_scene(path)
+    with pytest.raises(SceneFileError, match="is a directory, not a scene file"):
+        load_scene(tmp_path)
+
+
 def test_not_toml_and_missing_file(tmp_path):
     with pytest.raises(SceneFileError, match="not valid TOML"):
         loads_scene("[body\nmass = 1")
+    with pytest.raises(SceneFileError, match="not valid TOML: nested too deeply"):
+        loads_scene("x = " + "[" * 5000 + "]" * 5000)
+    with pytest.raises(SceneFileError, match="empty scene: expected at least"):
+        loads_scene("# only a comment\n")
     with pytest.raises(SceneFileError, match="no such scene file"):
         load_scene(tmp_path / "nope.toml")
 
