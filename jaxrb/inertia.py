@@ -260,11 +260,15 @@ def _analyse(J: Array, rtol: float, eigenvalues=symmetric_eigenvalues3):
     scale = jnp.max(jnp.abs(Jf), axis=(-2, -1))
     asym = jnp.max(jnp.abs(Jf - JT), axis=(-2, -1))
     not_symmetric = asym > rtol * scale
-    moments = eigenvalues(0.5 * (Jf + JT))
-    trace = jnp.sum(moments, axis=-1)
-    i1, i2, i3 = moments[..., 0], moments[..., 1], moments[..., 2]
+    # the conditions are scale invariant: analyse J / max |J| (divided in two halves, whose
+    # reciprocals stay normal numbers), so that no product overflows for huge or tiny tensors
+    half = jnp.sqrt(jnp.where(scale > 0, scale, 1.0))[..., None, None]
+    unit = eigenvalues(0.5 * (Jf / half / half + JT / half / half))
+    trace = jnp.sum(unit, axis=-1)
+    i1, i2, i3 = unit[..., 0], unit[..., 1], unit[..., 2]
     not_pd = i1 <= rtol * jnp.abs(trace)
     triangle = i1 + i2 < i3 - rtol * jnp.abs(trace)
+    moments = unit * half[..., 0] * half[..., 0]
     flags = InertiaViolations(
         not_symmetric=not_symmetric & ~non_finite,
         not_positive_definite=not_pd & ~non_finite,

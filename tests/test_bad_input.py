@@ -289,3 +289,11 @@ def test_zero_quaternion_raises_when_concrete_and_is_nan_under_jit():
         jaxrb.quat_normalize(jnp.zeros(4))
     angles = jax.jit(lambda q: jaxrb.quat_to_euler(q, "321"))(jnp.zeros(4))
     assert jnp.all(jnp.isnan(angles))
+
+
+@pytest.mark.parametrize("scale", [1e-300, 1e300])
+def test_inertia_checks_hold_at_any_scale(scale):
+    jaxrb.RigidBody(1.0, jnp.array([1.0, 2.0, 2.5]) * scale)  # valid: accepted
+    with pytest.raises(ValueError, match="triangle"):
+        jaxrb.RigidBody(1.0, jnp.array([1.0, 1.0, 3.0]) * scale)
+    assert jaxrb.inertia.is_valid_inertia(jnp.diag(jnp.array([1.0, 2.0, 2.5]) * scale))
