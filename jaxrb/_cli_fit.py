@@ -1,15 +1,17 @@
-"""`jaxrb fit`: fit inertia, restitution or drag to measured motion, from the command line.
+"""`jaxrb fit`: fit inertia, restitution, drag or contact to measured motion.
 
     jaxrb fit inertia DATA --inertia0 J       inertia tensor from angular velocity / attitude
     jaxrb fit restitution DATA        restitution (and drop height) from bounce times / apexes
     jaxrb fit drag DATA --mass M --drag0 K    drag coefficient from a tracked flight
+    jaxrb fit contact DATA --scene SCENE      restitution and friction from a tracked bounce
     jaxrb fit KIND --write-example FILE       an example data file from a known motion
 
 This file holds the data-file readers (CSV with a header row, or .npz) and their checks, the
 example-data writers, one `_fit_KIND` per kind (option checks, the call into `jaxrb.fit`, the
 rows of the summary), the summary and results file (`fit_KIND.json`), `cmd_fit`, and
-`add_fit_parser`, which adds `fit` and its kinds to the `jaxrb` parser (`_cli.py`). A bad data
-file is an error naming the file and the column.
+`add_fit_parser`, which adds `fit` and its kinds to the `jaxrb` parser (`_cli.py`). Every
+failure is one line on stderr, never a traceback: exit status 2 for a bad data file, scene or
+option (naming the file and the column or field), 1 for a fit that fails or does not converge.
 """
 
 from __future__ import annotations
@@ -24,10 +26,12 @@ import numpy as np
 
 from ._cli_common import (
     CLIError,
+    StagedOutput,
     _fmt,
-    _outputs_free,
     _table,
     add_output_options,
+    check_output,
+    one_line,
 )
 
 _EPILOG_FIT = """\
@@ -36,6 +40,7 @@ kinds:
                attitude samples of a tumbling body
   restitution  Newton's coefficient of restitution from the bounces of a dropped ball
   drag         a drag coefficient from the tracked flight of a body
+  contact      the floor's restitution and friction from a tracked body bouncing on it
 
 each kind reads a data file: CSV (a header row of column names, then one row per sample;
 lines starting with '#' are comments; extra columns are ignored) or .npz (one array per
@@ -46,8 +51,16 @@ motion; `jaxrb fit KIND --help` lists the columns and options.
 _FIT_OUTPUT = """
 output: OUTPUT/fit_{kind}.json: fitted values and one-sigma standard errors (Gauss-Newton,
 noise level estimated from the residuals), covariance, residual norm, degrees of freedom,
-condition number, converged or not, warnings. The summary table is printed. Exit status 0;
-1 if the fit did not converge; 2 for a bad data file or option.
+condition number, converged or not and why, steps taken and rejected, warnings. The summary
+table is printed.
+
+the fit: Levenberg-Marquardt; a trial step where the model cannot be evaluated (an invalid
+parameter, a failed simulation) is rejected and a shorter one tried. --max-steps is its
+budget of trial steps.
+
+exit status: 0 converged; 1 the fit did not converge or failed (one line on stderr; the
+results file is still written when the fit ran); 2 a bad data file or option (one line
+naming the file and the column, or the option).
 """
 
 _EPILOG_FIT_INERTIA = (
@@ -109,6 +122,31 @@ example:
   jaxrb fit drag --write-example flight.csv
   jaxrb fit drag flight.csv --mass 0.057 --drag0 0.002
 """ + _FIT_OUTPUT.format(kind="drag")
+
+_EPILOG_FIT_CONTACT = """\
+data columns:
+  t               sample times (s), strictly increasing; t[0] is the time of the scene's
+                  [initial] state
+  x, y, z         mass-centre position, WORLD frame, z up (m)
+  wx, wy, wz      optional: angular velocity in the BODY frame (rad/s), e.g. a gyro,
+                  weighted by --omega-weight (m per rad/s) against the positions
+  .npz may instead hold arrays pos (N, 3), omega (N, 3).
+
+the scene (--scene, a scene file or the name of a shipped example; see jaxrb run
+--show-default): its body (mass, inertia, [body.shape]), [[forces]], [floor] height and
+[initial] state are known; the floor's restitution and friction are the initial guesses
+(--restitution0, --friction0 override them). [simulation] is not used: the model is saved
+at the data's times, integrated with --rtol / --atol.
+
+model: jaxrb.simulate with the floor (impacts located as events, Newton's restitution and
+Coulomb friction), differentiated in forward mode across the impacts. Fitted: the
+restitution e in (0, 1) and, unless --fix-friction, the friction coefficient mu > 0.
+Friction is identifiable only if the contact slides at some impact.
+
+example (--write-example FILE also writes the scene, FILE with the suffix .toml):
+  jaxrb fit contact --write-example bounce.csv
+  jaxrb fit contact bounce.csv --scene bounce.toml
+""" + _FIT_OUTPUT.format(kind="contact")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -377,17 +415,52 @@ _DRAG_EXAMPLE = dict(
     t_end=1.5,
     num=16,
 )
+_CONTACT_EXAMPLE = dict(
+    mass=0.2,
+    radius=0.05,
+    restitution=0.6,
+    friction=0.1,
+    pos0=[0.0, 0.0, 0.5],
+    vel0=[1.5, 0.3, 0.0],
+    omega0=[5.0, -40.0, 0.0],
+    g=9.81,
+    t_end=0.8,
+    num=25,
+    guesses=(0.5, 0.2),
+)
+
+
+def _tolerances(args) -> tuple[float, float]:
+    """--rtol and --atol of the model's adaptive integrator (--atol defaults to --rtol)."""
+    rtol = _positive(args.rtol, "--rtol")
+    atol = rtol if args.atol is None else _positive(args.atol, "--atol")
+    return rtol, atol
 
 
 def _sim_kwargs(args) -> dict:
-    """Simulation settings of the fitted model: adaptive (--sim-tol) or fixed step (--dt)."""
+    """Simulation settings of the fitted model: adaptive (--rtol, --atol) or fixed step (--dt)."""
+    rtol, atol = _tolerances(args)
     if args.dt is not None:
         import diffrax as dfx
 
         dt = _positive(args.dt, "--dt")
         return dict(solver=dfx.Tsit5(), stepsize_controller=dfx.ConstantStepSize(), dt0=dt)
-    tol = _positive(args.sim_tol, "--sim-tol")
-    return dict(sim_rtol=tol, sim_atol=tol)
+    return dict(sim_rtol=rtol, sim_atol=atol)
+
+
+def _integrator(args) -> dict:
+    """The model's integrator settings, for the results file."""
+    if getattr(args, "dt", None) is not None:
+        return {"solver": "tsit5", "dt": float(args.dt)}
+    rtol, atol = _tolerances(args)
+    return {"solver": "tsit5 (adaptive)", "rtol": rtol, "atol": atol}
+
+
+def _max_steps(args) -> int:
+    """--max-steps, the Levenberg-Marquardt budget of trial steps."""
+    if args.max_steps < 1:
+        raise CLIError(f"--max-steps must be an integer >= 1, got {args.max_steps}")
+    return int(args.max_steps)
 
 
 def _rk4(f, y0, ts, h):
@@ -474,6 +547,114 @@ def _example_drag():
     return columns, comment, f"--mass {ex['mass']} --drag0 0.002"
 
 
+def _quat_multiply(a, b):
+    """Quaternion product a (x) b (scalar first)."""
+    return np.concatenate(
+        [[a[0] * b[0] - a[1:] @ b[1:]], a[0] * b[1:] + b[0] * a[1:] + np.cross(a[1:], b[1:])]
+    )
+
+
+def _quat_of_rotation(rotvec):
+    """The unit quaternion of a rotation vector (rad)."""
+    angle = np.linalg.norm(rotvec)
+    if angle == 0:
+        return np.array([1.0, 0.0, 0.0, 0.0])
+    return np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * rotvec / angle])
+
+
+def _bouncing_ball(ts, ex):
+    """Closed-form motion of a solid sphere bouncing on the floor z = 0 under gravity alone:
+    parabolic flights (constant world angular velocity), and at each impact Newton's
+    restitution on the normal velocity and Coulomb friction on the slip of the contact point
+    (it stops if mu P_n suffices, else P_t = -mu P_n along the slip). Returns the positions
+    (world, m) and body-frame angular velocities (rad/s) at `ts` (from t = 0, identity
+    attitude at the start)."""
+    m, radius, e, mu = ex["mass"], ex["radius"], ex["restitution"], ex["friction"]
+    inertia = 0.4 * m * radius**2
+    m_slip = m / (1 + m * radius**2 / inertia)  # effective mass of the contact point's slip
+    acc, arm = np.array([0.0, 0.0, -ex["g"]]), np.array([0.0, 0.0, -radius])
+    t, quat = 0.0, np.array([1.0, 0.0, 0.0, 0.0])
+    pos, vel, omega = (np.array(ex[k], float) for k in ("pos0", "vel0", "omega0"))
+
+    def fly(tau):
+        turn = _quat_multiply(_quat_of_rotation(omega * tau), quat)
+        return pos + vel * tau + 0.5 * acc * tau**2, vel + acc * tau, turn
+
+    positions, rates = [], []
+    for t_k in ts:
+        while True:
+            tau = (vel[2] + np.sqrt(vel[2] ** 2 + 2 * ex["g"] * (pos[2] - radius))) / ex["g"]
+            if t + tau > t_k:
+                break
+            pos, vel, quat = fly(tau)
+            t, pos[2] = t + tau, radius
+            p_n = -m * (1 + e) * vel[2]
+            slip = vel + np.cross(omega, arm)
+            slip[2] = 0.0
+            speed = np.linalg.norm(slip)
+            p_t = -m_slip * slip if mu * p_n >= m_slip * speed else -mu * p_n * slip / speed
+            vel = vel + (np.array([0.0, 0.0, p_n]) + p_t) / m
+            omega = omega + np.cross(arm, p_t) / inertia
+        p_k, _, q_k = fly(t_k - t)
+        conj = q_k * np.array([1.0, -1.0, -1.0, -1.0])
+        rates.append(_quat_multiply(_quat_multiply(conj, np.concatenate([[0.0], omega])), q_k)[1:])
+        positions.append(p_k)
+    return np.array(positions), np.array(rates)
+
+
+def _example_contact():
+    ex = _CONTACT_EXAMPLE
+    ts = np.linspace(0.0, ex["t_end"], ex["num"])
+    pos, omega = _bouncing_ball(ts, ex)
+    columns = {"t": ts}
+    columns.update({n: pos[:, i] for i, n in enumerate(("x", "y", "z"))})
+    columns.update({n: omega[:, i] for i, n in enumerate(("wx", "wy", "wz"))})
+    comment = (
+        "jaxrb fit contact example: a ball thrown with backspin, bouncing twice on a floor\n"
+        "(closed form: parabolic flights, Newton restitution and Coulomb friction at impacts).\n"
+        "t (s); x, y, z: mass-centre position, world frame, z up (m); wx, wy, wz: angular\n"
+        f"velocity, body frame (rad/s). true restitution {ex['restitution']}, true friction "
+        f"{ex['friction']} (the first impact slides)"
+    )
+    return columns, comment, ""
+
+
+def _example_contact_scene() -> str:
+    """The scene file of the contact example: the known ball, forces and initial state."""
+    ex = _CONTACT_EXAMPLE
+    e0, mu0 = ex["guesses"]
+    return f"""\
+# jaxrb fit contact example scene: the tracked ball (known), its forces and its state at the
+# first sample time. The floor's restitution and friction are the fit's initial guesses.
+title = "Ball bouncing with backspin"
+description = "A {ex["mass"]} kg ball of radius {ex["radius"]} m thrown with backspin."
+
+[body]
+mass = {ex["mass"]}                            # kg
+[body.shape]
+type = "sphere"                       # solid sphere: inertia 2/5 m r^2
+radius = {ex["radius"]}                         # m
+
+[initial]                             # at t = 0, the first sample
+pos = {ex["pos0"]}                # m, world frame
+vel = {ex["vel0"]}                # m/s, world frame
+omega = {ex["omega0"]}            # rad/s, BODY frame (identity attitude)
+
+[[forces]]
+type = "gravity"
+g = [0.0, 0.0, {-ex["g"]}]
+
+[floor]
+restitution = {e0}                     # initial guess
+friction = {mu0}                        # initial guess
+height = 0.0
+
+[simulation]                          # used by jaxrb run, not by jaxrb fit
+t_end = {ex["t_end"]}
+num_saves = {ex["num"]}
+"""
+
+
 def _known_torque(t, torque):
     """A body-frame `Wrench` from sampled torque (N m): constant, or linearly interpolated."""
     import jax.numpy as jnp
@@ -546,12 +727,14 @@ def _fit_inertia(data: _Data, args):
         fix_scale=args.fix_scale,
         omega_noise=_positive(args.omega_noise, "--omega-noise"),
         quat_noise=_positive(args.quat_noise, "--quat-noise"),
+        max_steps=_max_steps(args),
         **_sim_kwargs(args),
     )
     info = {
         "samples": int(t.size),
         "observed": [n for n, v in (("omega", omega), ("quat", quat)) if v is not None],
         "known_torque": torque is not None,
+        "integrator": _integrator(args),
     }
     return (lambda: jaxrb.fit.fit_inertia(t, **kwargs)), (lambda res: _describe_inertia(res, info))
 
@@ -622,6 +805,7 @@ def _fit_restitution(data: _Data, args):
         g=g,
         time_noise=_positive(args.time_noise, "--time-noise"),
         height_noise=_positive(args.height_noise, "--height-noise"),
+        max_steps=_max_steps(args),
     )
     info = {
         "impacts": 0 if times is None else int(times.size),
@@ -680,9 +864,15 @@ def _fit_drag(data: _Data, args):
         vel=vel,
         fit_initial=not args.no_fit_initial,
         g=(0.0, 0.0, -g),
+        max_steps=_max_steps(args),
         **_sim_kwargs(args),
     )
-    info = {"samples": int(t.size), "mass": mass, "model": args.model}
+    info = {
+        "samples": int(t.size),
+        "mass": mass,
+        "model": args.model,
+        "integrator": _integrator(args),
+    }
     return (lambda: jaxrb.fit.fit_drag(t, pos, **kwargs)), (
         lambda res: _describe_drag(res, info, g)
     )
@@ -704,10 +894,104 @@ def _describe_drag(res, info, g):
     return rows, {**info, "terminal_speed": v_t}, [("terminal speed (m/s)", _fmt(v_t))]
 
 
+def _fit_contact(data: _Data, args):
+    import jaxrb
+    import jaxrb.fit
+
+    from ._scene_examples import scene_path
+    from ._scene_file import SceneFileError, load_scene
+
+    if args.scene is None:
+        raise CLIError(
+            "--scene is required: a scene file (or a shipped example's name) giving the body "
+            "and its shape, the forces, the floor and the state at the first sample time"
+        )
+    t = data.times("t")
+    pos = data.group(("x", "y", "z"), "the position")
+    if pos is None:
+        data.fail(
+            "missing column 'x': need mass-centre positions x, y, z (world frame, z up, m); "
+            f"columns found: {data.found()}"
+        )
+    omega = data.group(("wx", "wy", "wz"), "the angular velocity")
+    data.same_length({k: v for k, v in (("t", t), ("x", pos), ("wx", omega)) if v is not None})
+    if t.size < 2:
+        data.fail(f"too few samples: {t.size} row(s); a tracked bounce needs many samples")
+    try:
+        spec = load_scene(scene_path(args.scene))
+    except SceneFileError as e:
+        raise CLIError(str(e)) from None
+    scene = spec.scene
+    if scene.floor is None:
+        raise CLIError(
+            f"{spec.source}: the scene has no [floor]; jaxrb fit contact fits the floor's "
+            "restitution and friction"
+        )
+    e0 = float(scene.floor.restitution if args.restitution0 is None else args.restitution0)
+    if not 0 < e0 < 1:
+        where = "--restitution0" if args.restitution0 is not None else "[floor].restitution"
+        raise CLIError(
+            f"{where}: the initial guess of the restitution must be in (0, 1), got {e0:g}"
+            + ("; give --restitution0" if args.restitution0 is None else "")
+        )
+    friction0 = None if args.friction0 is None else _positive(args.friction0, "--friction0")
+    if args.fix_friction:
+        if friction0 is not None:  # held at the given value instead of the scene's
+            floor = jaxrb.Floor(scene.floor.restitution, friction0, scene.floor.height)
+            scene = jaxrb.Scene(scene.body, scene.forces, floor=floor)
+        friction0 = None
+    elif friction0 is None:
+        friction0 = float(scene.floor.friction)
+        if friction0 <= 0:
+            raise CLIError(
+                f"{spec.source}: [floor].friction is 0: give --friction0 > 0 as the initial "
+                "guess, or --fix-friction to hold it"
+            )
+    if args.max_impacts < 1:
+        raise CLIError(f"--max-impacts must be an integer >= 1, got {args.max_impacts}")
+    rtol, atol = _tolerances(args)
+    kwargs = dict(
+        omega=omega,
+        restitution0=e0,
+        friction0=friction0,
+        omega_weight=_positive(args.omega_weight, "--omega-weight"),
+        max_steps=_max_steps(args),
+        sim_rtol=rtol,
+        sim_atol=atol,
+        max_impacts=int(args.max_impacts),
+    )
+    gap = float(np.linalg.norm(pos[0] - np.asarray(spec.state0.pos)))
+    info = {
+        "samples": int(t.size),
+        "scene": spec.source,
+        "observed": ["pos"] + (["omega"] if omega is not None else []),
+        "friction_fitted": friction0 is not None,
+        "initial_position_gap": gap,
+        "integrator": _integrator(args),
+    }
+    return (lambda: jaxrb.fit.fit_contact(scene, spec.state0, t, pos, **kwargs)), (
+        lambda res: _describe_contact(res, info)
+    )
+
+
+def _describe_contact(res, info):
+    rows = [
+        ("restitution e", res.values["restitution"], res.std["restitution"], ""),
+        ("friction mu", res.values["friction"], res.std["friction"], ""),
+    ]
+    extra = [
+        ("scene", info["scene"]),
+        ("first sample - scene start (m)", _fmt(info["initial_position_gap"], 3)),
+    ]
+    return rows, info, extra
+
+
+# kind -> (checks and fit, example data, example scene or None)
 _FITS = {
-    "inertia": (_fit_inertia, _example_inertia),
-    "restitution": (_fit_restitution, _example_restitution),
-    "drag": (_fit_drag, _example_drag),
+    "inertia": (_fit_inertia, _example_inertia, None),
+    "restitution": (_fit_restitution, _example_restitution, None),
+    "drag": (_fit_drag, _example_drag, None),
+    "contact": (_fit_contact, _example_contact, _example_contact_scene),
 }
 
 
@@ -743,7 +1027,11 @@ def _fit_report(res, rows, extra, data_path, results_path, notes) -> str:
     r = np.asarray(res.residuals)
     diag = [
         ("data", str(data_path)),
-        ("converged", f"{'yes' if res.converged else 'NO'} ({res.message}, {res.num_steps} steps)"),
+        (
+            "converged",
+            f"{'yes' if res.converged else 'NO'} ({res.message}; {res.num_steps} steps, "
+            f"{res.num_rejected} rejected)",
+        ),
         ("residuals (n, dof)", f"{r.size}, {res.dof}"),
         ("residual norm |r|", _fmt(np.linalg.norm(r), 4)),
         ("rms residual", _fmt(np.sqrt(np.mean(r**2)), 4)),
@@ -759,27 +1047,73 @@ def _fit_report(res, rows, extra, data_path, results_path, notes) -> str:
 
 
 def cmd_fit(args) -> int:
+    """`jaxrb fit KIND`: every failure is one line on stderr, never a traceback: exit status
+    2 for a bad data file, scene, option or output path; 1 for a fit that fails or does not
+    converge (or an unexpected error); 130 when interrupted."""
+    import warnings
+
+    name = " ".join(filter(None, ("jaxrb fit", args.fit_kind)))
+
+    def one_line_warning(message, category, filename, lineno, file=None, line=None):
+        print(f"{name}: warning: {one_line(message)}", file=sys.stderr)
+
+    try:
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.showwarning = one_line_warning
+            return _cmd_fit(args, name)
+    except CLIError as e:
+        print(f"{name}: error: {one_line(e)}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"{name}: interrupted; nothing written", file=sys.stderr)
+        return 130
+    except MemoryError:
+        print(f"{name}: error: out of memory; nothing written", file=sys.stderr)
+        return 1
+    except Exception as e:  # noqa: BLE001 - a failed fit or a bug: still one line
+        print(
+            f"{name}: error: the fit failed: {type(e).__name__}: {one_line(e)}; nothing written",
+            file=sys.stderr,
+        )
+        return 1
+
+
+def _write_example(kind: str, path: Path, force: bool) -> int:
+    """`--write-example FILE`: the example data (and scene) files, written together."""
+    _, example_fn, scene_fn = _FITS[kind]
+    files = [path]
+    if scene_fn is not None:
+        files.append(path.with_suffix(".toml"))
+        if files[1] == path:
+            raise CLIError(f"--write-example {path}: give a .csv or .npz data file name")
+    existing = [f for f in files if f.exists()]
+    if existing and not force:
+        raise CLIError(
+            f"output already exists: {existing[0]}; use --force to overwrite, or give another FILE"
+        )
+    columns, comment, hint = example_fn()
+    with StagedOutput(path.parent, [f.name for f in files], force) as staged:
+        _write_columns(staged.path / path.name, columns, comment)
+        if scene_fn is not None:
+            (staged.path / files[1].name).write_text(scene_fn(), encoding="utf-8")
+            hint = f"--scene {files[1]} {hint}"
+        staged.commit()
+    print("\n".join(f"# {line}" for line in comment.splitlines()))
+    written = " and ".join(str(f) for f in files)
+    print(f"wrote {written}; try: jaxrb fit {kind} {path} {hint}".rstrip())
+    return 0
+
+
+def _cmd_fit(args, name: str) -> int:
     import warnings
 
     kind = args.fit_kind
     if kind is None:
-        raise CLIError("say what to fit: jaxrb fit {inertia,restitution,drag} DATA (see --help)")
-    prepare, example_fn = _FITS[kind]
+        raise CLIError(f"say what to fit: jaxrb fit {{{','.join(_FITS)}}} DATA (see --help)")
     if args.write_example is not None:
         if args.data is not None:
             raise CLIError("--write-example writes an example data file: give no DATA with it")
-        path = Path(args.write_example)
-        try:
-            _outputs_free(path.parent, [path.name], args.force)
-        except CLIError:
-            raise CLIError(
-                f"output already exists: {path}\n  use --force to overwrite, or give another FILE"
-            ) from None
-        columns, comment, hint = example_fn()
-        _write_columns(path, columns, comment)
-        print("\n".join(f"# {line}" for line in comment.splitlines()))
-        print(f"wrote {path}; try: jaxrb fit {kind} {path} {hint}".rstrip())
-        return 0
+        return _write_example(kind, Path(args.write_example), args.force)
     if args.data is None:
         raise CLIError(
             f"give a DATA file (CSV or .npz), or create one with "
@@ -788,8 +1122,9 @@ def cmd_fit(args) -> int:
     data = _read_data(Path(args.data))
     outdir = Path(args.output)
     results_name = f"fit_{kind}.json"
+    prepare = _FITS[kind][0]
     run_fit, describe = prepare(data, args)  # all data and option checks
-    _outputs_free(outdir, [results_name], args.force)  # before the (slow) fit
+    check_output(outdir, [results_name], args.force)  # before the (slow) fit
     import jaxrb.fit
 
     with warnings.catch_warnings(record=True) as caught:
@@ -798,14 +1133,12 @@ def cmd_fit(args) -> int:
             res = run_fit()
         except ValueError as e:  # the library's own checks of the data
             raise CLIError(f"{data.path}: {e}") from None
-        except FloatingPointError as e:  # e.g. a non-finite Jacobian at the solution
-            print(f"jaxrb fit {kind}: the fit failed: {e}; nothing written", file=sys.stderr)
-            return 1
     rows, info, extra = describe(res)
     values = {k: res.values[k] for k in res.names} | info.pop("values", {})
     notes = list(res.warnings)
+    fit_warnings = (jaxrb.fit.IdentifiabilityWarning, jaxrb.fit.ConvergenceWarning)
     for w in caught:  # identifiability / convergence warnings go into the table
-        if issubclass(w.category, jaxrb.fit.IdentifiabilityWarning | jaxrb.fit.ConvergenceWarning):
+        if issubclass(w.category, fit_warnings):
             if str(w.message) not in notes:
                 notes.append(str(w.message))
         else:
@@ -818,8 +1151,12 @@ def cmd_fit(args) -> int:
         "values": values,
         "std": {k: res.std[k] for k in res.names},
         "converged": bool(res.converged),
+        "reason": res.reason,
         "message": res.message,
         "num_steps": int(res.num_steps),
+        "num_rejected": int(res.num_rejected),
+        "num_invalid": int(res.num_invalid),
+        "max_steps": int(args.max_steps),
         "residual_norm": float(np.linalg.norm(res.residuals)),
         "residual_rms": float(np.sqrt(np.mean(np.asarray(res.residuals) ** 2))),
         "num_residuals": int(np.size(res.residuals)),
@@ -831,10 +1168,18 @@ def cmd_fit(args) -> int:
         **info,
     }
     path = outdir / results_name
-    path.write_text(json.dumps(_jsonable(report), indent=2) + "\n", encoding="utf-8")
+    with StagedOutput(outdir, [results_name], args.force) as staged:
+        text = json.dumps(_jsonable(report), indent=2) + "\n"
+        (staged.path / results_name).write_text(text, encoding="utf-8")
+        staged.commit()
     print(_fit_report(res, rows, extra, data.path, path, notes))
     if not res.converged:
-        print(f"jaxrb fit {kind}: the fit did not converge: {res.message}", file=sys.stderr)
+        hint = "; raise --max-steps" if res.reason == "max_steps" else ""
+        print(
+            f"{name}: error: the fit did not converge: {res.message} ({res.num_steps} steps, "
+            f"{res.num_rejected} rejected){hint}; results in {path}",
+            file=sys.stderr,
+        )
         return 1
     return 0
 
@@ -847,7 +1192,7 @@ def add_fit_parser(sub):
     """Add the `fit` command and its kinds to the subparsers `sub` of the `jaxrb` parser."""
     fit = sub.add_parser(
         "fit",
-        help="fit inertia, restitution or drag to measured motion (CSV or .npz data)",
+        help="fit inertia, restitution, drag or contact to measured motion (CSV or .npz data)",
         description="Fit physical parameters to measured motion by least squares through "
         "the model, with standard errors and identifiability warnings.",
         epilog=_EPILOG_FIT,
@@ -856,7 +1201,7 @@ def add_fit_parser(sub):
     kinds = fit.add_subparsers(dest="fit_kind", metavar="KIND")
     fit.set_defaults(func=cmd_fit, fit_kind=None)
 
-    def fit_parser(kind, help, description, epilog, example):
+    def fit_parser(kind, help, description, epilog, example, max_steps=100):
         p = kinds.add_parser(
             kind,
             help=help,
@@ -874,23 +1219,42 @@ def add_fit_parser(sub):
             default=None,
             help=f"write an example data file (.csv or .npz) from {example} and exit",
         )
+        p.add_argument(
+            "--max-steps",
+            type=int,
+            default=max_steps,
+            metavar="N",
+            help="budget of Levenberg-Marquardt trial steps, accepted and rejected "
+            f"(default {max_steps})",
+        )
         p.set_defaults(func=cmd_fit)
         return p
 
-    def sim_options(p):
+    def tolerance_options(p, default):
         p.add_argument(
-            "--sim-tol",
+            "--rtol",
             type=float,
-            default=1e-11,
-            metavar="TOL",
-            help="rtol = atol of the model's adaptive integrator (default 1e-11)",
+            default=default,
+            metavar="RTOL",
+            help=f"relative tolerance of the model's adaptive integrator (default {default:g})",
         )
+        p.add_argument(
+            "--atol",
+            type=float,
+            default=None,
+            metavar="ATOL",
+            help="absolute tolerance of the model's adaptive integrator (default: --rtol)",
+        )
+
+    def sim_options(p):
+        tolerance_options(p, 1e-11)
         p.add_argument(
             "--dt",
             type=float,
             default=None,
             metavar="DT",
-            help="integrate the model with fixed steps DT (s) instead (Tsit5)",
+            help="integrate the model with fixed steps DT (s) instead (Tsit5; --rtol and "
+            "--atol then unused)",
         )
         p.add_argument(
             "--no-fit-initial",
@@ -947,6 +1311,7 @@ def add_fit_parser(sub):
         "ball dropped from rest onto a floor.",
         _EPILOG_FIT_RESTITUTION,
         "a ball dropped from rest",
+        max_steps=200,
     )
     fr.add_argument("--h0", type=float, default=None, help="known drop height (m); else fitted")
     fr.add_argument(
@@ -1006,3 +1371,55 @@ def add_fit_parser(sub):
     )
     fd.add_argument("--g", type=float, default=9.81, help="gravity (m/s^2, default 9.81)")
     sim_options(fd)
+
+    fc = fit_parser(
+        "contact",
+        "restitution and friction from a tracked trajectory with bounces",
+        "Fit the floor's coefficient of restitution and Coulomb friction coefficient to the "
+        "tracked positions (and optionally gyro data) of a body bouncing on it, through the "
+        "simulation with impacts.",
+        _EPILOG_FIT_CONTACT,
+        "a ball thrown with backspin (with its scene file)",
+    )
+    fc.add_argument(
+        "--scene",
+        metavar="SCENE",
+        help="scene file (TOML) or a shipped example's name: the body and its shape, the "
+        "forces, the floor and the state at the first sample time (required)",
+    )
+    fc.add_argument(
+        "--restitution0",
+        type=float,
+        default=None,
+        metavar="E",
+        help="initial guess in (0, 1) (default: the scene's [floor].restitution)",
+    )
+    fc.add_argument(
+        "--friction0",
+        type=float,
+        default=None,
+        metavar="MU",
+        help="initial guess > 0 (default: the scene's [floor].friction); with "
+        "--fix-friction, the value held",
+    )
+    fc.add_argument(
+        "--fix-friction",
+        action="store_true",
+        help="fit the restitution only; hold the friction (at --friction0 or the scene's)",
+    )
+    fc.add_argument(
+        "--omega-weight",
+        type=float,
+        default=0.01,
+        metavar="W",
+        help="weight of the wx, wy, wz residuals against the positions (m per rad/s; "
+        "default 0.01: a gyro error of 1 rad/s counts as a position error of 1 cm)",
+    )
+    fc.add_argument(
+        "--max-impacts",
+        type=int,
+        default=16,
+        metavar="K",
+        help="most impacts the model may have (default 16)",
+    )
+    tolerance_options(fc, 1e-10)

@@ -1,4 +1,6 @@
 """`jaxrb fit` (inertia, restitution, drag) and result messages, called in-process via `main`.
+(`jaxrb fit contact`: `test_fit_contact.py`, beside the library fit it shares a compiled
+solver with.)
 
 Round trips: `--write-example` writes data from a known synthetic motion, the fit must give the
 known values back (noise-free data: tight relative tolerances). The truths are written out
@@ -46,7 +48,7 @@ def test_inertia_round_trip(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["fit", "inertia", str(data), "--inertia0", "2.5,3,3.5", "-o", str(out)]) == 0
     printed = capsys.readouterr().out
-    assert "Jxy" in printed and "omega0_z" in printed and "yes (successful" in printed
+    assert "Jxy" in printed and "omega0_z" in printed and "yes (the Gauss-Newton" in printed
     res = _json(out / "fit_inertia.json")
     assert res["converged"] and res["known_torque"] and res["warnings"] == []
     # a known torque fixes the absolute scale: the tensor itself comes back
@@ -304,6 +306,16 @@ def test_bad_data_file(tmp_path, capsys, kind, name, content, extra, message):
         (["fit", "drag", "DATA", "--mass", "-1", "--drag0", "1"], "--mass must be"),
         (["fit", "restitution", "DATA", "--restitution0", "1.5"], "--restitution0 must be in"),
         (["fit", "restitution", "DATA", "--write-example", "x.csv"], "give no DATA"),
+        (["fit", "restitution", "DATA", "--max-steps", "0"], "--max-steps must be"),
+        (["fit", "drag", "DATA", "--mass", "1", "--drag0", "1", "--rtol", "-1"], "--rtol must be"),
+        (["fit", "inertia", "DATA", "--inertia0", "1,2,2.5", "--atol", "nan"], "--atol must be"),
+        (["fit", "contact", "DATA"], "--scene is required"),
+        (["fit", "contact", "DATA", "--scene", "nowhere.toml"], "no such scene file"),
+        (["fit", "contact", "DATA", "--scene", "pendulum"], "the scene has no [floor]"),
+        (["fit", "contact", "DATA", "--scene", "coin", "--restitution0", "1"], "--restitution0"),
+        (["fit", "contact", "DATA", "--scene", "coin", "--friction0", "0"], "--friction0 must"),
+        (["fit", "contact", "DATA", "--scene", "coin", "--max-impacts", "0"], "--max-impacts"),
+        (["fit", "contact", "--write-example", "x.toml"], "give a .csv or .npz"),
     ],
 )
 def test_bad_options(tmp_path, monkeypatch, capsys, args, message):
@@ -316,8 +328,102 @@ def test_bad_options(tmp_path, monkeypatch, capsys, args, message):
     )
     args = [str(data) if a == "DATA" else a for a in args]
     assert main(args) == 2
-    assert message in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "jaxrb-output").exists()
+
+
+# one data file per kind: (header, extra arguments)
+_KINDS = {
+    "inertia": ("t,wx,wy,wz", ["--inertia0", "1,2,2.5"]),
+    "restitution": ("impact_time,apex_height", []),
+    "drag": ("t,x,y,z", ["--mass", "1", "--drag0", "0.1"]),
+    "contact": ("t,x,y,z", ["--scene", "coin"]),
+}
+
+
+def _rows(header, nan_at=None):
+    width = len(header.split(","))
+    rows = []
+    for i in range(6):
+        cells = [f"{0.5 + i}"] + [f"{1.0 / (i + 1) + j}" for j in range(1, width)]
+        if i == nan_at:
+            cells[-1] = "nan"
+        rows.append(",".join(cells))
+    return header + "\n" + "\n".join(rows) + "\n"
+
+
+@pytest.mark.parametrize("kind", list(_KINDS))
+@pytest.mark.parametrize(
+    "case, message",
+    [
+        ("missing file", "no such data file"),
+        ("malformed", None),
+        ("nan", "NaN at line 5"),
+    ],
+)
+def test_hostile_data_per_kind(tmp_path, capsys, kind, case, message):
+    """Each kind refuses a missing file, a malformed CSV and NaN in the data: exit status 2,
+    one line naming the file, nothing written."""
+    header, extra = _KINDS[kind]
+    path = tmp_path / "data.csv"
+    width = len(header.split(","))
+    if case == "malformed":  # one value too many on line 4
+        lines = _rows(header).splitlines()
+        lines[3] += ",1"
+        path.write_text("\n".join(lines) + "\n")
+        message = f"line 4: {width + 1} values but the header has {width} columns"
+    elif case == "nan":
+        path.write_text(_rows(header, nan_at=3))
+    out = tmp_path / "out"
+    assert main(["fit", kind, str(path), "-o", str(out), *extra]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"jaxrb fit {kind}: error: {path}: "), err
+    assert len(err.strip().splitlines()) == 1 and message in err, err
+    assert not out.exists()
+
+
+def test_max_steps_and_rtol(tmp_path, capsys):
+    """--max-steps is the budget of trial steps (too few: exit 1, one line, results written,
+    saying so); --rtol and --atol set the model's integrator (recorded in the results)."""
+    data = tmp_path / "flight.csv"
+    assert main(["fit", "drag", "--write-example", str(data)]) == 0
+    base = ["fit", "drag", str(data), "--mass", "0.057", "--drag0", "0.002"]
+    capsys.readouterr()
+    assert main([*base, "-o", str(tmp_path / "few"), "--max-steps", "1"]) == 1
+    captured = capsys.readouterr()
+    err = captured.err.strip().splitlines()
+    assert len(err) == 1 and "did not converge" in err[0] and "raise --max-steps" in err[0]
+    assert "NO (the budget of max_steps" in captured.out
+    res = _json(tmp_path / "few" / "fit_drag.json")
+    assert not res["converged"] and res["reason"] == "max_steps"
+    assert res["num_steps"] == 1 and res["max_steps"] == 1
+
+    out = tmp_path / "tight"
+    args = [*base, "-o", str(out), "--rtol", "1e-9", "--atol", "1e-10", "--max-steps", "40"]
+    assert main(args) == 0
+    res = _json(out / "fit_drag.json")
+    assert res["converged"] and res["num_steps"] <= 40
+    assert res["integrator"] == {"solver": "tsit5 (adaptive)", "rtol": 1e-9, "atol": 1e-10}
+    assert abs(res["values"]["drag"] / K_TRUE - 1) <= 1e-6
+
+
+def test_fit_failure_is_one_line(tmp_path, capsys, monkeypatch):
+    """An unexpected failure inside the fit: exit status 1, one line, nothing written."""
+    data = tmp_path / "bounces.csv"
+    assert main(["fit", "restitution", "--write-example", str(data)]) == 0
+    capsys.readouterr()
+
+    def fail(**kwargs):
+        raise RuntimeError("solver exploded\n  with a second line")
+
+    monkeypatch.setattr(jaxrb.fit, "fit_restitution", fail)
+    out = tmp_path / "out"
+    assert main(["fit", "restitution", str(data), "-o", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1, err
+    assert "the fit failed: RuntimeError: solver exploded with a second line" in err
+    assert not out.exists()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -361,11 +467,13 @@ def test_report_shows_warnings_and_fixed_values():
         num_steps=200,
         message="max steps",
         warnings=("poorly identifiable: condition number 2.00e+09",),
+        reason="max_steps",
+        num_rejected=7,
     )
     rows = [("restitution e", 0.7, 0.01, ""), ("h0", 1.2, 0.0, "m")]
     text = _fit_report(res, rows, [], "d.csv", "out/fit.json", list(res.warnings))
     assert "warning: poorly identifiable: condition number 2.00e+09" in text
-    assert "NO (max steps, 200 steps)" in text
+    assert "NO (max steps; 200 steps, 7 rejected)" in text
     assert "0.005" in text  # |r| = 5e-3
     h0_row = [ln for ln in text.splitlines() if ln.startswith("h0")][0]
     assert "fixed" in h0_row
@@ -391,10 +499,11 @@ def test_result_name_gives_the_message():
 @pytest.mark.parametrize(
     "command, words",
     [
-        (["fit"], ["inertia", "restitution", "drag", "--write-example"]),
+        (["fit"], ["inertia", "restitution", "drag", "contact", "--write-example"]),
         (["fit", "inertia"], ["wx, wy, wz", "e0, e1, e2, e3", "tx, ty, tz", "--inertia0"]),
         (["fit", "restitution"], ["impact_time", "apex_height", "--radius", "--h0"]),
-        (["fit", "drag"], ["x, y, z", "--mass", "--drag0", "fit_drag.json"]),
+        (["fit", "drag"], ["x, y, z", "--mass", "--drag0", "fit_drag.json", "--max-steps"]),
+        (["fit", "contact"], ["x, y, z", "wx, wy, wz", "--scene", "--fix-friction", "--rtol"]),
     ],
 )
 def test_fit_help(command, words, capsys):

@@ -1,4 +1,7 @@
-"""Restitution from bounces and drag from a flight: noise-free recovery and noisy coverage."""
+"""Restitution from bounces and drag from a flight: noise-free recovery and noisy coverage.
+
+Restitution and friction through the impact simulation: `test_fit_contact.py`.
+"""
 
 import diffrax as dfx
 import jax.numpy as jnp
@@ -109,67 +112,3 @@ def test_bad_input(flight):
         jf.fit_restitution(impact_times=[0.5, 0.4, 1.2])
     with pytest.raises(ValueError, match="needs"):
         jf.fit_restitution()
-
-
-# ------------------------------------------------------------ through the impact simulation
-
-E_BALL, MU_BALL, R_BALL = 0.6, 0.1, 0.05
-
-
-def _spinning_ball_scene(e, mu):
-    body = jaxrb.RigidBody(0.2, shape=jaxrb.Sphere(R_BALL))
-    return jaxrb.Scene(
-        body, forces=(jaxrb.Gravity(), jaxrb.QuadraticDrag(1e-3)), floor=jaxrb.Floor(e, mu)
-    )
-
-
-BALL_STATE0 = jaxrb.make_state(pos=(0.0, 0.0, 0.5), vel=(1.5, 0.3, 0.0), omega=(5.0, -40.0, 0.0))
-BALL_TS = np.linspace(0.0, 0.8, 25)  # two bounces, before the ball starts to roll
-
-
-@pytest.fixture(scope="module")
-def tracked_ball():
-    traj = jaxrb.simulate(
-        _spinning_ball_scene(E_BALL, MU_BALL),
-        BALL_STATE0,
-        jnp.asarray(BALL_TS),
-        rtol=1e-12,
-        atol=1e-12,
-    )
-    assert int(traj.impacts.count) >= 2  # the data contain bounces
-    return np.asarray(traj.states.pos), np.asarray(traj.states.omega)
-
-
-def test_contact_fit_from_tracked_trajectory(tracked_ball):
-    """Restitution and friction of a spinning ball's bounces, from positions and gyro data,
-    through the simulation with impacts, from starts 30 % off. The backspin makes the first
-    contact slide (it would stick for mu > 0.21), so friction shapes the data."""
-    pos, omega = tracked_ball
-    res = jf.fit_contact(
-        _spinning_ball_scene(0.5, 0.5),
-        BALL_STATE0,
-        BALL_TS,
-        pos,
-        omega=omega,
-        omega_weight=0.01,
-        restitution0=0.42,
-        friction0=0.13,
-    )
-    assert res.converged, res.message
-    assert abs(res.values["restitution"] / E_BALL - 1) <= 1e-6
-    assert abs(res.values["friction"] / MU_BALL - 1) <= 1e-6
-    assert np.all(np.isfinite(res.std["restitution"])) and not res.warnings
-
-
-def test_contact_fit_bad_input(tracked_ball):
-    pos, _ = tracked_ball
-    scene = _spinning_ball_scene(0.5, 0.5)
-    with pytest.raises(ValueError, match="pos"):
-        jf.fit_contact(scene, BALL_STATE0, BALL_TS, pos[:-1])
-    with pytest.raises(ValueError, match="pos"):
-        jf.fit_contact(scene, BALL_STATE0, BALL_TS, np.where(pos > 0.4, np.nan, pos))
-    with pytest.raises(ValueError, match="restitution0"):
-        jf.fit_contact(scene, BALL_STATE0, BALL_TS, pos, restitution0=1.2)
-    with pytest.raises(ValueError, match="Floor"):
-        no_floor = jaxrb.Scene(jaxrb.RigidBody(0.2, shape=jaxrb.Sphere(R_BALL)))
-        jf.fit_contact(no_floor, BALL_STATE0, BALL_TS, pos)

@@ -1,5 +1,8 @@
-"""Fit physical parameters from observed motion: Levenberg–Marquardt (optimistix) through the
-differentiable simulation, with Gauss–Newton uncertainties and identifiability reports.
+"""Fit physical parameters from observed motion: Levenberg–Marquardt through the
+differentiable simulation, with Gauss–Newton uncertainties and identifiability reports. A
+trial step where the model cannot be evaluated (an invalid parameter, a failed simulation) is
+rejected and a shorter one tried; `FitResult.converged`, `reason` and `num_steps` say how the
+fit ended.
 
 - `fit_inertia`: full inertia tensor (products included) from attitude / angular velocity.
 - `fit_drag`: drag coefficient from a tracked flight.

@@ -15,7 +15,15 @@ from .._floor import Floor
 from .._scene import Scene
 from .._simulate import simulate
 from .._state import State
-from ._least_squares import FitResult, check_series, check_times, least_squares_fit, require_samples
+from ._least_squares import (
+    FitResult,
+    check_series,
+    check_times,
+    check_tolerances,
+    least_squares_fit,
+    nan_unless_solved,
+    require_samples,
+)
 from ._parameterisation import (
     positive_to_unconstrained,
     unconstrained_to_positive,
@@ -32,6 +40,7 @@ class _ContactResiduals(eqx.Module):
     scene: Scene
     state0: State
     fit_friction: bool = eqx.field(static=True)
+    sim_tol: jnp.ndarray  # (rtol, atol) of the adaptive integrator
     sim_kwargs: tuple = eqx.field(static=True)
 
     def physical(self, z):
@@ -44,14 +53,21 @@ class _ContactResiduals(eqx.Module):
         floor = Floor(e, mu, self.scene.floor.height)
         scene = Scene(self.scene.body, self.scene.forces, floor=floor)
         traj = simulate(
-            scene, self.state0, self.ts, adjoint=dfx.ForwardMode(), **dict(self.sim_kwargs)
+            scene,
+            self.state0,
+            self.ts,
+            adjoint=dfx.ForwardMode(),
+            rtol=self.sim_tol[0],
+            atol=self.sim_tol[1],
+            throw=False,
+            **dict(self.sim_kwargs),
         )
         res = jnp.ravel(traj.states.pos - self.pos_data)
         if self.omega_data is not None:
             res = jnp.concatenate(
                 [res, jnp.ravel((traj.states.omega - self.omega_data) * self.omega_weight)]
             )
-        return res
+        return nan_unless_solved(traj, res)
 
 
 def fit_contact(
@@ -112,7 +128,7 @@ def fit_contact(
         internal += ("log friction",)
     z0 = np.asarray(z0, dtype=float)
     require_samples(pos.size + (0 if omega is None else omega.size), z0.size, "the samples")
-    sim_kwargs = dict(rtol=sim_rtol, atol=sim_atol, max_impacts=max_impacts)
+    sim_kwargs = dict(max_impacts=max_impacts)
     fn = _ContactResiduals(
         ts=jnp.asarray(ts),
         pos_data=jnp.asarray(pos),
@@ -121,6 +137,7 @@ def fit_contact(
         scene=scene,
         state0=state0,
         fit_friction=friction0 is not None,
+        sim_tol=check_tolerances(sim_rtol, sim_atol),
         sim_kwargs=tuple(sim_kwargs.items()),
     )
     return least_squares_fit(

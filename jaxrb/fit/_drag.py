@@ -10,7 +10,15 @@ from .._forces import Gravity, LinearDrag, QuadraticDrag
 from .._scene import Scene
 from .._simulate import simulate
 from .._state import State
-from ._least_squares import FitResult, check_series, check_times, least_squares_fit, require_samples
+from ._least_squares import (
+    FitResult,
+    check_series,
+    check_times,
+    check_tolerances,
+    least_squares_fit,
+    nan_unless_solved,
+    require_samples,
+)
 from ._parameterisation import unconstrained_to_positive
 
 _MODELS = {"quadratic": QuadraticDrag, "linear": LinearDrag}
@@ -27,6 +35,7 @@ class _DragResiduals(eqx.Module):
     vel_ref: jnp.ndarray
     model: str = eqx.field(static=True)
     fit_initial: bool = eqx.field(static=True)
+    sim_tol: jnp.ndarray  # (rtol, atol) of the adaptive integrator
     sim_kwargs: tuple = eqx.field(static=True)
 
     def physical(self, z):
@@ -41,13 +50,22 @@ class _DragResiduals(eqx.Module):
         scene = Scene(body, forces=(Gravity(self.g), _MODELS[self.model](coefficient)))
         quat = jnp.array([1.0, 0.0, 0.0, 0.0], dtype=z.dtype)
         state0 = State(pos0, quat, vel0, jnp.zeros(3, dtype=z.dtype))
-        traj = simulate(scene, state0, self.ts, adjoint=dfx.ForwardMode(), **dict(self.sim_kwargs))
+        traj = simulate(
+            scene,
+            state0,
+            self.ts,
+            adjoint=dfx.ForwardMode(),
+            rtol=self.sim_tol[0],
+            atol=self.sim_tol[1],
+            throw=False,
+            **dict(self.sim_kwargs),
+        )
         res = jnp.ravel(traj.states.pos - self.pos_data)
         if self.vel_data is not None:
             res = jnp.concatenate(
                 [res, jnp.ravel((traj.states.vel - self.vel_data) * self.vel_weight)]
             )
-        return res
+        return nan_unless_solved(traj, res)
 
 
 def fit_drag(
@@ -120,8 +138,6 @@ def fit_drag(
     )
     require_samples(pos.size + (0 if vel is None else vel.size), z0.size, "the tracked positions")
     sim_kwargs = dict(
-        rtol=sim_rtol,
-        atol=sim_atol,
         solver=solver,
         stepsize_controller=stepsize_controller,
         dt0=dt0,
@@ -137,6 +153,7 @@ def fit_drag(
         vel_ref=jnp.asarray(vel0),
         model=model,
         fit_initial=bool(fit_initial),
+        sim_tol=check_tolerances(sim_rtol, sim_atol),
         sim_kwargs=tuple(sim_kwargs.items()),
     )
     return least_squares_fit(

@@ -18,7 +18,9 @@ from ._least_squares import (
     IdentifiabilityWarning,
     check_series,
     check_times,
+    check_tolerances,
     least_squares_fit,
+    nan_unless_solved,
     require_samples,
 )
 from ._parameterisation import inertia_to_log_cholesky, log_cholesky_to_inertia, perturb_quat
@@ -48,6 +50,7 @@ class _InertiaResiduals(eqx.Module):
     fix_scale: bool = eqx.field(static=True)
     fit_omega0: bool = eqx.field(static=True)
     fit_quat0: bool = eqx.field(static=True)
+    sim_tol: jnp.ndarray  # (rtol, atol) of the adaptive integrator
     sim_kwargs: tuple = eqx.field(static=True)
 
     def split(self, z):
@@ -74,14 +77,23 @@ class _InertiaResiduals(eqx.Module):
         scene = Scene(RigidBody(self.mass, inertia), forces=self.forces)
         zero = jnp.zeros(3, dtype=z.dtype)
         state0 = State(zero, quat0, zero, omega0)
-        traj = simulate(scene, state0, self.ts, adjoint=dfx.ForwardMode(), **dict(self.sim_kwargs))
+        traj = simulate(
+            scene,
+            state0,
+            self.ts,
+            adjoint=dfx.ForwardMode(),
+            rtol=self.sim_tol[0],
+            atol=self.sim_tol[1],
+            throw=False,
+            **dict(self.sim_kwargs),
+        )
         parts = []
         if self.omega_data is not None:
             parts.append(jnp.ravel((traj.states.omega - self.omega_data) * self.omega_weight))
         if self.quat_data is not None:
             err = _attitude_error(traj.states.quat, self.quat_data)
             parts.append(jnp.ravel(err * self.quat_weight))
-        return jnp.concatenate(parts)
+        return nan_unless_solved(traj, jnp.concatenate(parts))
 
 
 def fit_inertia(
@@ -205,10 +217,9 @@ def fit_inertia(
         fix_scale=bool(fix_scale),
         fit_omega0=bool(fit_initial),
         fit_quat0=bool(fit_quat0),
+        sim_tol=check_tolerances(sim_rtol, sim_atol),
         sim_kwargs=tuple(
             dict(
-                rtol=sim_rtol,
-                atol=sim_atol,
                 max_steps=sim_max_steps,
                 solver=solver,
                 stepsize_controller=stepsize_controller,

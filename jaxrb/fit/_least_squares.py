@@ -1,8 +1,22 @@
 """Shared Levenberg–Marquardt driver, Gauss–Newton uncertainty and the convergence report.
 
 The optimiser works on an unconstrained internal vector `z` (see `_parameterisation`); the
-user sees physical values `theta = to_physical(z)`. At the solution, with residual Jacobian
-`J = dr/dz`, `n` residuals and `p` free parameters:
+user sees physical values `theta = to_physical(z)`.
+
+Levenberg–Marquardt with Marquardt's scaling (`D` = the largest column norms of the
+Jacobian seen so far): each trial step `h` minimises `|J h + r|^2 + mu |D h|^2`. A trial
+point is accepted when its residuals and Jacobian are finite and the cost `|r|^2 / 2` falls
+by at least 1e-4 of the drop the linear model predicts; otherwise it is rejected, `mu` grows
+and the step is retried from the last accepted point. A model that cannot be evaluated at a
+trial point (a failed simulation, an invalid parameter, an overflow) returns NaN there, so
+such a step is rejected like any other, never an abort. Convergence, at an accepted point:
+
+- `small_step`: the Gauss–Newton step is small, `|h_GN| <= atol + rtol |z|`;
+- `stationary`: the residual is orthogonal to the model's tangent space: no step reduces the
+  cost by more than `rtol` of itself to first order (`|P r|^2 <= rtol |r|^2`, `P` the
+  projection onto the range of `J`).
+
+At the solution, with residual Jacobian `J = dr/dz`, `n` residuals and `p` free parameters:
 
 - `sigma^2 = |r|^2 / (n - p)` (residual variance; data assumed i.i.d. Gaussian),
 - `Cov(z) = sigma^2 (J^T J)^-1`, propagated to the physical values with the delta method
@@ -15,14 +29,29 @@ user sees physical values `theta = to_physical(z)`. At the solution, with residu
 import dataclasses
 import warnings
 from collections.abc import Callable
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
+
+from .._results import RESULTS
 
 DEFAULT_COND_WARN = 1e8
+
+_ACCEPT = 1e-4  # least ratio of actual to predicted cost reduction of an accepted step
+_MU0 = 1e-3  # initial damping, relative to the squared column scales
+
+REASONS = {
+    "small_step": "the Gauss-Newton step fell below atol + rtol |z|",
+    "stationary": "no step can reduce the cost by more than rtol of itself",
+    "max_steps": "the budget of max_steps trial steps was used up",
+    "no_progress": "no trial step reduced the cost, down to steps at round-off",
+    "invalid_start": "the model cannot be evaluated at the initial guess (non-finite "
+    "residuals or Jacobian, e.g. a failed simulation)",
+}
+_CODES = tuple(REASONS)  # reason code i + 1 in the solver loop; 0 = still running
 
 
 class IdentifiabilityWarning(UserWarning):
@@ -52,9 +81,16 @@ class FitResult:
     - `jacobian`: (n, p) residual Jacobian in the internal coordinates.
     - `condition_number`: of the column-scaled Jacobian (inf when singular).
     - `converged`: the solver met its tolerances within `max_steps`.
-    - `num_steps`: solver iterations.
-    - `message`: the solver's result message.
+    - `num_steps`: trial steps taken (model evaluations after the initial guess), accepted
+      and rejected.
+    - `message`: why the solver stopped, in words.
     - `warnings`: the warnings raised (identifiability, convergence, notes).
+    - `reason`: why the solver stopped, a key of `REASONS` ("small_step", "stationary":
+      converged; "max_steps", "no_progress", "invalid_start": not converged).
+    - `num_rejected`: trial steps rejected (the cost did not fall enough, or the model
+      could not be evaluated there).
+    - `num_invalid`: of those, the ones where the model could not be evaluated (non-finite
+      residuals or Jacobian: a failed simulation, an invalid parameter).
     """
 
     values: dict
@@ -70,6 +106,9 @@ class FitResult:
     num_steps: int
     message: str
     warnings: tuple = ()
+    reason: str = ""
+    num_rejected: int = 0
+    num_invalid: int = 0
 
     @property
     def cost(self) -> float:
@@ -79,7 +118,8 @@ class FitResult:
     def report(self) -> str:
         """A human-readable convergence and uncertainty report."""
         lines = [
-            f"converged: {self.converged} after {self.num_steps} steps ({self.message})",
+            f"converged: {self.converged} after {self.num_steps} steps, "
+            f"{self.num_rejected} rejected ({self.message})",
             f"residuals: n = {self.residuals.size}, dof = {self.dof}, "
             f"rms = {np.sqrt(np.mean(self.residuals**2)):.3e}, sigma^2 = {self.sigma2:.3e}",
             f"condition number (column-scaled J): {self.condition_number:.3e}",
@@ -95,19 +135,133 @@ class FitResult:
         return self.report()
 
 
-@eqx.filter_jit
-def _solve(fn, z0, rtol, atol, max_steps):
-    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
-    sol = optx.least_squares(fn, solver, z0, None, max_steps=max_steps, throw=False)
-    return sol.value, sol.result, sol.stats["num_steps"]
+class _Loop(NamedTuple):
+    z: jax.Array  # the last accepted point, its residuals, Jacobian, cost
+    r: jax.Array
+    jac: jax.Array
+    cost: jax.Array
+    scale: jax.Array  # Marquardt's column scales D
+    mu: jax.Array  # damping
+    nu: jax.Array  # growth factor of mu on rejection
+    trial: jax.Array  # the point evaluated next
+    pred: jax.Array  # the cost drop the linear model predicts for it
+    num_steps: jax.Array
+    num_rejected: jax.Array
+    num_invalid: jax.Array
+    reason: jax.Array  # 0 while running, else 1 + index into _CODES
+
+
+def _code(name: str) -> int:
+    return 1 + _CODES.index(name)
 
 
 @eqx.filter_jit
-def _linearise(fn, to_physical, z):
-    r = fn(z, None)
-    jac = jax.jacfwd(fn)(z, None)
+def _solve(fn, to_physical, z0, rtol, atol, max_steps):
+    """Levenberg–Marquardt from `z0` (see the module docstring); one compiled evaluation of
+    the residuals and their Jacobian (forward mode) per trial point."""
+    z0 = jnp.asarray(z0)
+    dtype = z0.dtype
+    eps = jnp.finfo(dtype).eps
+    r_struct = jax.eval_shape(lambda z: fn(z, None), z0)
+    n, p = r_struct.shape[0], z0.shape[0]
+    rtol, atol = jnp.asarray(rtol, dtype), jnp.asarray(atol, dtype)
+    one, zero = jnp.ones((), dtype), jnp.zeros((), dtype)
+
+    def evaluate(z):
+        def with_value(zz):
+            r = jnp.asarray(fn(zz, None), dtype)
+            return r, r
+
+        jac, r = jax.jacfwd(with_value, has_aux=True)(z)
+        return r, jac
+
+    def body(s: _Loop) -> _Loop:
+        first = s.reason < 0
+        r_t, jac_t = evaluate(s.trial)
+        valid = jnp.all(jnp.isfinite(r_t)) & jnp.all(jnp.isfinite(jac_t))
+        cost_t = jnp.where(valid, 0.5 * jnp.sum(jnp.where(valid, r_t, zero) ** 2), jnp.inf)
+        rho = jnp.where(s.pred > 0, (s.cost - cost_t) / s.pred, -jnp.inf)
+        accept = valid & (first | (rho > _ACCEPT))
+        z = jnp.where(accept, s.trial, s.z)
+        r = jnp.where(accept, r_t, s.r)
+        jac = jnp.where(accept, jac_t, s.jac)
+        cost = jnp.where(accept, cost_t, s.cost)
+        col = jnp.linalg.norm(jac, axis=0)
+        scale = jnp.where(accept, jnp.maximum(jnp.where(first, zero, s.scale), col), s.scale)
+        scale = jnp.where(scale > 0, scale, one)
+        grow = jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3)
+        mu = jnp.where(first, _MU0, jnp.where(accept, s.mu * grow, s.mu * s.nu))
+        nu = jnp.where(accept, 2.0 * one, 2.0 * s.nu)
+
+        # in the scaled variables y = D h: J_s = J D^-1 = U diag(sv) V^T
+        u, sv, vt = jnp.linalg.svd(jac / scale, full_matrices=False)
+        utr = u.T @ r
+        keep = sv > sv[0] * eps * max(n, p)
+        safe_sv = jnp.where(keep, sv, one)
+        stationary = jnp.sum(jnp.where(keep, utr, zero) ** 2) <= rtol * 2.0 * cost
+        h_gn = -(vt.T @ jnp.where(keep, utr / safe_sv, zero)) / scale
+        small = jnp.linalg.norm(h_gn) <= atol + rtol * jnp.linalg.norm(z)
+        coef = sv / (sv**2 + mu)
+        y = -(vt.T @ (coef * utr))
+        pred = 0.5 * jnp.sum((sv * coef * utr) ** 2) + mu * jnp.sum(y**2)
+        h = y / scale
+
+        num_steps = s.num_steps + jnp.where(first, 0, 1)
+        num_rejected = s.num_rejected + jnp.where(accept | first, 0, 1)
+        num_invalid = s.num_invalid + jnp.where(valid | first, 0, 1)
+        stuck = ~accept & (jnp.linalg.norm(h) <= eps * (jnp.linalg.norm(z) + eps))
+        reason = jnp.select(
+            [
+                first & ~valid,
+                accept & small,
+                accept & stationary,
+                stuck | ~jnp.isfinite(mu),
+                num_steps >= max_steps,
+            ],
+            [
+                _code("invalid_start"),
+                _code("small_step"),
+                _code("stationary"),
+                _code("no_progress"),
+                _code("max_steps"),
+            ],
+            0,
+        ).astype(jnp.int32)
+        return _Loop(
+            z=z,
+            r=r,
+            jac=jac,
+            cost=cost,
+            scale=scale,
+            mu=mu,
+            nu=nu,
+            trial=z + h,
+            pred=pred,
+            num_steps=num_steps,
+            num_rejected=num_rejected,
+            num_invalid=num_invalid,
+            reason=reason,
+        )
+
+    count = jnp.zeros((), jnp.asarray(max_steps).dtype)
+    init = _Loop(
+        z=z0,
+        r=jnp.zeros((n,), dtype),
+        jac=jnp.zeros((n, p), dtype),
+        cost=jnp.asarray(jnp.inf, dtype),
+        scale=jnp.ones((p,), dtype),
+        mu=jnp.asarray(_MU0, dtype),
+        nu=2.0 * one,
+        trial=z0,
+        pred=one,
+        num_steps=count,
+        num_rejected=count,
+        num_invalid=count,
+        reason=-jnp.ones((), jnp.int32),
+    )
+    s = jax.lax.while_loop(lambda s: s.reason <= 0, body, init)
     flat = lambda zz: jnp.concatenate([jnp.ravel(v) for v in to_physical(zz)])  # noqa: E731
-    return r, jac, to_physical(z), jax.jacfwd(flat)(z)
+    return s, to_physical(s.z), jax.jacfwd(flat)(s.z)
 
 
 def least_squares_fit(
@@ -125,16 +279,23 @@ def least_squares_fit(
 ) -> FitResult:
     """Minimise `|fn(z)|^2` with Levenberg–Marquardt and report values, errors, identifiability.
 
+    Never raises for a model that fails during the fit: a trial point where `fn` or its
+    Jacobian is not finite is rejected (the damping grows and a shorter step is tried), and
+    a fit that stops without meeting its tolerances says so (`converged`, `reason`,
+    `message`, and a `ConvergenceWarning`).
+
     **Arguments:**
 
-    - `fn`: `fn(z, None) -> (n,)` residuals; pure and jittable. An `eqx.Module` holding the
-      data as array fields is best: a new data set of the same shapes then reuses the
-      compiled solver.
+    - `fn`: `fn(z, None) -> (n,)` residuals; pure and jittable; NaN where the model cannot be
+      evaluated (e.g. a failed simulation). An `eqx.Module` holding the data as array
+      fields is best: a new data set or start of the same shapes then reuses the compiled
+      solver.
     - `z0`: (p,) initial internal parameters.
     - `to_physical`: `z -> tuple of arrays`, the physical values named `names`.
     - `internal_names`: a label per entry of `z` (for identifiability warnings).
-    - `rtol`, `atol`: optimistix Levenberg–Marquardt tolerances.
-    - `max_steps`: iteration budget.
+    - `rtol`, `atol`: convergence tolerances (module docstring): the Gauss–Newton step
+      `|h| <= atol + rtol |z|`, or the relative first-order cost reduction `<= rtol`.
+    - `max_steps`: budget of trial steps (each evaluates `fn` and its Jacobian once).
     - `cond_warn`: condition-number threshold of the identifiability warning.
     - `notes`: facts to attach to `FitResult.warnings` without emitting them (e.g. that the
       scale was fixed by the caller's choice).
@@ -142,30 +303,46 @@ def least_squares_fit(
     **Returns:** a `FitResult`.
     """
     z0 = jnp.asarray(z0)
-    z, result, num_steps = _solve(fn, z0, rtol, atol, max_steps)
-    r, jac, values_flat, grad_phys = _linearise(fn, to_physical, z)
-    r, jac, grad_phys = np.asarray(r), np.asarray(jac), np.asarray(grad_phys)
+    for name, tol in (("rtol", rtol), ("atol", atol)):
+        if not (np.isfinite(tol) and tol >= 0):
+            raise ValueError(f"{name} must be a finite number >= 0, got {tol}")
+    if int(max_steps) != max_steps or max_steps < 0:
+        raise ValueError(f"max_steps must be an integer >= 0, got {max_steps}")
+    state, values_flat, grad_phys = _solve(
+        fn, to_physical, z0, jnp.asarray(rtol), jnp.asarray(atol), jnp.asarray(int(max_steps))
+    )
+    r, jac, grad_phys = np.asarray(state.r), np.asarray(state.jac), np.asarray(grad_phys)
     values_flat = [np.asarray(v) for v in values_flat]
+    reason = _CODES[int(state.reason) - 1]
+    converged = reason in ("small_step", "stationary")
+    if reason == "invalid_start":  # nothing was accepted: no residuals to show
+        r, jac = np.full_like(r, np.nan), np.full_like(jac, np.nan)
     n, p = jac.shape
     dof = n - p
-    sigma2 = float(np.sum(r**2) / dof)
 
     found = list(notes)
-    converged = bool(result == optx.RESULTS.successful)
-    message = optx.RESULTS[result] if not converged else "successful"
     if not converged:
-        found.append(f"least squares did not converge: {message}")
+        found.append(f"least squares did not converge: {REASONS[reason]}")
         warnings.warn(found[-1], ConvergenceWarning, stacklevel=3)
 
-    col = np.linalg.norm(jac, axis=0)
-    col = np.where(col > 0, col, 1.0)
-    u, s, vt = np.linalg.svd(jac, full_matrices=False)
-    s_scaled = np.linalg.svd(jac / col, compute_uv=False)
-    cond = float(s_scaled[0] / s_scaled[-1]) if s_scaled[-1] > 0 else float("inf")
-    if not np.all(np.isfinite(jac)):
-        raise FloatingPointError("the residual Jacobian at the solution is not finite")
-    if cond > cond_warn:
-        _, _, vt_scaled = np.linalg.svd(jac / col, full_matrices=False)
+    # finiteness first: SVD cannot take NaN (only an invalid start leaves them)
+    finite = bool(np.all(np.isfinite(r)) and np.all(np.isfinite(jac)))
+    if finite:
+        sigma2 = float(np.sum(r**2) / dof)
+        col = np.linalg.norm(jac, axis=0)
+        col = np.where(col > 0, col, 1.0)
+        u, s, vt = np.linalg.svd(jac, full_matrices=False)
+        _, s_scaled, vt_scaled = np.linalg.svd(jac / col, full_matrices=False)
+        cond = float(s_scaled[0] / s_scaled[-1]) if s_scaled[-1] > 0 else float("inf")
+        # Cov(z) = sigma^2 V diag(1/s^2) V^T, singular directions dropped (pseudo-inverse).
+        tol = s[0] * max(n, p) * np.finfo(float).eps if s.size else 0.0
+        inv_s2 = np.where(s > tol, 1.0 / np.where(s > tol, s, 1.0) ** 2, 0.0)
+        cov_z = sigma2 * (vt.T * inv_s2) @ vt
+        cov = grad_phys @ cov_z @ grad_phys.T
+    else:
+        sigma2, cond = float("nan"), float("nan")
+        cov = np.full((grad_phys.shape[0],) * 2, np.nan)
+    if finite and cond > cond_warn:
         weak = vt_scaled[-1]
         order = np.argsort(-np.abs(weak))
         involved = [internal_names[i] for i in order if abs(weak[i]) > 0.2 * abs(weak[order[0]])]
@@ -174,12 +351,6 @@ def least_squares_fit(
             f"{cond_warn:.0e}; the data barely constrain the combination of {', '.join(involved)}"
         )
         warnings.warn(found[-1], IdentifiabilityWarning, stacklevel=3)
-
-    # Cov(z) = sigma^2 V diag(1/s^2) V^T, singular directions dropped (pseudo-inverse).
-    tol = s[0] * max(n, p) * np.finfo(float).eps if s.size else 0.0
-    inv_s2 = np.where(s > tol, 1.0 / np.where(s > tol, s, 1.0) ** 2, 0.0)
-    cov_z = sigma2 * (vt.T * inv_s2) @ vt
-    cov = grad_phys @ cov_z @ grad_phys.T
     std_flat = np.sqrt(np.clip(np.diagonal(cov), 0.0, None))
 
     values, std, i = {}, {}, 0
@@ -198,10 +369,30 @@ def least_squares_fit(
         jacobian=jac,
         condition_number=cond,
         converged=converged,
-        num_steps=int(num_steps),
-        message=message,
+        num_steps=int(state.num_steps),
+        message=REASONS[reason],
         warnings=tuple(found),
+        reason=reason,
+        num_rejected=int(state.num_rejected),
+        num_invalid=int(state.num_invalid),
     )
+
+
+def nan_unless_solved(traj, residuals):
+    """`residuals` where the simulation `traj` succeeded, NaN where it failed (the driver
+    then rejects the trial point)."""
+    return jnp.where(traj.result == RESULTS.successful, residuals, jnp.nan)
+
+
+def check_tolerances(rtol, atol) -> jax.Array:
+    """`(rtol, atol)` of a model's adaptive integrator, checked (finite, >= 0, not both 0), as
+    one array: new values reuse the compiled fit."""
+    for name, tol in (("sim_rtol", rtol), ("sim_atol", atol)):
+        if not (np.isfinite(tol) and tol >= 0):
+            raise ValueError(f"{name} must be a finite number >= 0, got {tol}")
+    if rtol == 0 and atol == 0:
+        raise ValueError("sim_rtol and sim_atol must not both be 0")
+    return jnp.asarray([rtol, atol], dtype=float)
 
 
 def check_series(x, name: str, trailing: tuple[int, ...], n_times: int | None = None) -> np.ndarray:
