@@ -15,24 +15,6 @@ def _free_compiled_code():
     jax.clear_caches()
 
 
-@pytest.hookimpl(tryfirst=True)
-def pytest_collection_modifyitems(config, items):
-    """Groups for parallel workers (pytest-xdist, `--dist loadgroup`): a test module's tests
-    run on one worker, so that the compiled functions they share are compiled once; a test
-    marked `compiles_alone` (its programs are its own, and take long to compile) is a group
-    of its own (with its parameter cases, or each case alone with `per_case=True`), so that
-    the slowest modules are spread over the workers."""
-    for item in items:
-        alone = item.get_closest_marker("compiles_alone")
-        if alone is None:
-            group = item.path.name
-        elif alone.kwargs.get("per_case", False):
-            group = item.nodeid
-        else:
-            group = f"{item.path.name}::{item.originalname}"
-        item.add_marker(pytest.mark.xdist_group(group))
-
-
 @pytest.fixture
 def getkey():
     """A function returning a fresh PRNG key on each call (deterministic sequence)."""

@@ -66,7 +66,6 @@ def _settle_batch(omegas, quats, vels, coin):
     return scene, jax.vmap(run)(omegas, quats, vels)
 
 
-@pytest.mark.compiles_alone
 @pytest.mark.parametrize("coin", [False, True], ids=["die", "coin"])
 def test_tumbling_die_and_coin(coin, getkey):
     """Random throws: never below the floor (1e-9 m), energy never rises (at an event, or
@@ -284,7 +283,6 @@ def test_bad_input_clear_errors():
         )
 
 
-@pytest.mark.compiles_alone
 def test_bad_input_flagged_under_vmap():
     """Traced restitution / friction / start height: one result code per member."""
     ts = jnp.linspace(0.0, 1.0, 14)
@@ -311,7 +309,6 @@ def test_bad_input_flagged_under_vmap():
         assert got == want._value
 
 
-@pytest.mark.compiles_alone
 def test_float32_die_settles():
     """A float32 scene (with float64 enabled elsewhere) bounces and comes to rest on a face."""
     f32 = lambda x: jnp.asarray(x, jnp.float32)  # noqa: E731

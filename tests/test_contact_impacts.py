@@ -84,7 +84,6 @@ def _height_at(params, T, forward_mode=False):
 _height_grad = jax.jit(jax.jacfwd(lambda p, T: _height_at(p, T, forward_mode=True)))
 
 
-@pytest.mark.compiles_alone
 def test_ball_gradients_across_impacts():
     h0, v0, e = 1.0, 0.5, 0.7
     t_imp = np.asarray(ball_impact_times(h0, e, 3, v0=v0))
@@ -126,7 +125,6 @@ _spin_ball_jacobian = jax.jit(jax.jacrev(lambda p: _spin_ball_final(p)[0]))
 _spin_ball = jax.jit(_spin_ball_final)
 
 
-@pytest.mark.compiles_alone
 @pytest.mark.parametrize("mu", [0.2, 0.6], ids=["sliding", "sticking"])
 def test_gradients_across_impact_wrt_friction_drag_inertia(mu):
     """d(final state)/d(friction, drag coefficient, moment of inertia, height) vs central
@@ -192,7 +190,6 @@ def _face_landing(key, e, mu):
     return *kinetics, law, renumbered, event, jnp.sum(touching), approach
 
 
-@pytest.mark.compiles_alone
 def test_impact_law_face_landings(getkey):
     """Face landings (four touching corners, solved together): the outcome does not depend
     on how the corners are numbered; the Newton-Coulomb impulse pushes and stays in the

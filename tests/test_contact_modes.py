@@ -149,7 +149,6 @@ def _second_impact_time(b, forward_mode=False):
     return _box_run(half, m, 0.0, 2.0, state0, ts, forward_mode=forward_mode).impacts.time[1]
 
 
-@pytest.mark.compiles_alone
 def test_rocking_block_gradient_of_second_impact_time():
     """d(second impact time)/d(half-width) through two impacts and the rocking between them,
     against central differences (1e-5). Forward mode (quicker to compile than reverse mode;
@@ -282,7 +281,6 @@ _slipping_coin_jvp = jax.jit(
 )
 
 
-@pytest.mark.compiles_alone
 def test_rolling_coin_gradient_wrt_friction_and_spin():
     """d(mass centre at 0.3 s)/d(friction, initial spin) of a coin whose rim slips at first
     and then rolls (a slide -> stick mode change), forward mode, against central
@@ -313,7 +311,6 @@ def test_rolling_coin_gradient_wrt_friction_and_spin():
 # ------------------------------------------------------------------ the reported cases
 
 
-@pytest.mark.compiles_alone
 def test_repro_die_penetration():
     """A die thrown onto a floor with friction for 10 s: never below the floor by more than
     1e-9 m at any save or event, energy never rises at an event, at rest on a face."""
@@ -340,7 +337,6 @@ def test_repro_die_penetration():
     assert int(tr.contact.kind[-1]) == jaxrb.contact.KIND_NAMES.index("face")
 
 
-@pytest.mark.compiles_alone
 def test_repro_coin_energy():
     """A coin thrown for 10 s: no impact records a negative energy loss, the energy never
     rises at an event or between saves (beyond the solver's tolerance), no penetration."""

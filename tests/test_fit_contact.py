@@ -53,7 +53,6 @@ def _cache_size():
     return None if size is None else size()
 
 
-@pytest.mark.compiles_alone
 def test_contact_fit_from_tracked_trajectory(tracked_ball):
     """Restitution and friction from positions and gyro data, from starts 30 % off."""
     pos, omega = tracked_ball

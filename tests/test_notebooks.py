@@ -15,7 +15,6 @@ def test_notebooks_found():
     assert NOTEBOOKS, "no notebooks/NN_*.py found"
 
 
-@pytest.mark.compiles_alone(per_case=True)
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
 def test_notebook_runs(path, monkeypatch):
     nb = jupytext.read(path)
