@@ -24,6 +24,10 @@ Each body is checked for what a picture would show:
   <= dt sqrt(2 K / I_min);
 - its result code, and how it ends (resting on a face, on an edge or rim, moving).
 
+`--shapes d4,d8,d12,d20` throws the regular polyhedral dice of `jaxrb.dice` (same density as
+the cube); for them the table adds how squarely each ends on a face and how often each number
+came up.
+
 Writes `contact_throws.md` (the table and the counts), `contact_throws.png` (energy above
 the floor over time, the lowest point's height, the final state) and per shape
 `contact_throws_SHAPE.npz` (the per-body checks and counts) to `--out`; existing files are
@@ -63,6 +67,24 @@ SHAPES = {
     "die": (0.0045, lambda: jaxrb.Box(jnp.full(3, 0.008)), 0.008, 4.0),
     "coin": (0.0075, lambda: jaxrb.Cylinder(0.012, 0.001), 0.001, 2.0),
 }
+DICE_DENSITY = 0.0045 / 0.016**3  # kg/m^3, that of the cube die
+
+
+def _polyhedral_die(sides):
+    """(mass, shape, inradius, T) of the regular die with `sides` faces (jaxrb.dice sizes)."""
+    shape = jaxrb.dice.BUILDERS[sides]().shape
+    inradius = min(
+        float(jnp.dot(n, shape.vertices[f[0]]))
+        for n, f in zip(shape.face_normals(), shape.faces, strict=True)
+    )
+    return (DICE_DENSITY * float(shape.volume), lambda: shape, inradius, 4.0)
+
+
+for _sides in (4, 8, 12, 20):
+    SHAPES[f"d{_sides}"] = _polyhedral_die(_sides)
+    PLURAL[f"d{_sides}"] = f"d{_sides} dice"
+DEFAULT_SHAPES = "die,coin"
+DICE = {f"d{sides}": sides for sides in (4, 8, 12, 20)}
 
 
 def throws(n, seed):
@@ -223,7 +245,11 @@ def code_summary(code):
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--n", type=int, default=200, help="bodies per shape")
-    p.add_argument("--shapes", default="die,coin", help="comma-separated: die, coin")
+    p.add_argument(
+        "--shapes",
+        default=DEFAULT_SHAPES,
+        help=f"comma-separated, of: {', '.join(SHAPES)} (die: the cube as a Box)",
+    )
     p.add_argument(
         "--chunk",
         type=int,
@@ -241,7 +267,8 @@ def main(argv=None):
     for kind in shapes:
         if kind not in SHAPES:
             p.error(f"--shapes: unknown shape {kind!r} (known: {', '.join(SHAPES)})")
-    stem = "contact_throws" if len(shapes) == len(SHAPES) else "contact_throws_" + "_".join(shapes)
+    default = args.shapes == DEFAULT_SHAPES
+    stem = "contact_throws" if default else "contact_throws_" + "_".join(shapes)
     paths = [os.path.join(args.out, stem + ext) for ext in (".md", ".png")]
     paths += [os.path.join(args.out, f"contact_throws_{kind}.npz") for kind in shapes]
     existing = [q for q in paths if os.path.exists(q)]
@@ -249,7 +276,7 @@ def main(argv=None):
         p.error(f"{existing[0]} exists (pass --force to overwrite)")
     os.makedirs(args.out, exist_ok=True)
     device = C.device_name()
-    results, lines = {}, []
+    results, lines, faces_notes = {}, [], []
     lines.append(
         f"# Random throws of dice and coins (N = {args.n} each, rtol = atol = {args.rtol:g}, "
         f"max_impacts = {args.max_impacts}, {args.chunk} per call, "
@@ -278,6 +305,17 @@ def main(argv=None):
             f"{compile_s:.0f} | {run_s / args.n:.3f} |"
         )
         print(lines[-1], flush=True)
+        if kind in DICE:
+            die = jaxrb.dice.BUILDERS[DICE[kind]]()
+            final_quat = out[0].states.quat[:, -1]
+            r["alignment"] = np.asarray(die.face_alignment(final_quat))
+            r["outcome"] = np.asarray(die.outcome(final_quat))
+            counts = np.bincount(r["outcome"], minlength=die.sides + 1)[1:]
+            faces_notes.append(
+                f"- {kind}: lowest face alignment (cos of the tilt) "
+                f"{r['alignment'].min():.12f}; numbers 1-{die.sides} came up "
+                + " ".join(str(c) for c in counts)
+            )
         per_body = {k: v for k, v in r.items() if k not in ("lowest", "energy", "ts")}
         np.savez(os.path.join(args.out, f"contact_throws_{kind}.npz"), **per_body)
         bad = np.flatnonzero(~r["ok"] | r["sinks"] | r["gains"] | r["jumps"])
@@ -291,6 +329,8 @@ def main(argv=None):
                 + "\n"
             )
     plot(results, paths[1])
+    if faces_notes:
+        lines += ["", "Polyhedral dice at the end:", *faces_notes]
     text = "\n".join(lines) + f"\n\n![throws]({os.path.basename(paths[1])})\n"
     with open(paths[0], "w") as f:
         f.write(text)

@@ -7,7 +7,7 @@ body-embedded (moving) axes, R = R_a(phi1) R_b(phi2) R_c(phi3).
 
 import importlib.metadata
 
-from . import inertia as inertia
+from . import dice as dice, inertia as inertia
 from ._batched import simulate_batch as simulate_batch
 from ._body import RigidBody as RigidBody
 from ._dynamics import (
@@ -37,6 +37,7 @@ from ._forces import (
 )
 from ._invariants import angular_momentum as angular_momentum, energy as energy
 from ._joints import AbstractJoint as AbstractJoint, Hinge as Hinge, Pivot as Pivot
+from ._polyhedron import ConvexPolyhedron as ConvexPolyhedron
 from ._quaternion import (
     axis_angle_to_quat as axis_angle_to_quat,
     matrix_to_quat as matrix_to_quat,

@@ -41,17 +41,24 @@ def _sphere_faces(radius, n=10):
 def body_faces(scene):
     """Polygons (body frame, m) drawing the scene's body; face colours alternate per face.
 
-    Without a shape: the box with the same principal moments (equivalent uniform cuboid).
+    Without a shape (or with one it cannot draw): the box with the same principal moments
+    (equivalent uniform cuboid).
     """
     import jaxrb
 
     shape = scene.body.shape
+    faces = None
     if isinstance(shape, jaxrb.Box):
-        return _box_faces(np.asarray(shape.half_extents, float))
-    if isinstance(shape, jaxrb.Cylinder):
-        return _cylinder_faces(float(shape.radius), float(shape.half_height))
-    if isinstance(shape, jaxrb.Sphere):
-        return _sphere_faces(float(shape.radius))
+        faces = _box_faces(np.asarray(shape.half_extents, float))
+    elif isinstance(shape, jaxrb.Cylinder):
+        faces = _cylinder_faces(float(shape.radius), float(shape.half_height))
+    elif isinstance(shape, jaxrb.Sphere):
+        faces = _sphere_faces(float(shape.radius))
+    elif isinstance(shape, jaxrb.ConvexPolyhedron):
+        vertices = np.asarray(shape.vertices, float)
+        faces = [vertices[list(f)] for f in shape.faces]
+    if faces is not None:  # the shape's centre sits at its offset from the mass centre
+        return [f + np.asarray(shape.offset, float) for f in faces]
     J = np.asarray(scene.body.inertia_matrix, float)
     moments = np.linalg.eigvalsh(J) if not np.allclose(J, np.diag(np.diag(J))) else np.diag(J)
     m = float(scene.body.mass)

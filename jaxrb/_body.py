@@ -21,8 +21,9 @@ class RigidBody(eqx.Module):
       (shape (3,)) when the body axes are principal axes. The principal form selects the
       cheaper Euler equations in the right-hand side. For a batch of bodies given in
       principal moments with explicit leading axes, pass `principal=True`.
-    - `shape`: optional `Sphere`, `Box` or `Cylinder` for contact and plotting; if `inertia` is
-      None it is computed from the shape as a uniform solid.
+    - `shape`: optional `Sphere`, `Box`, `Cylinder` or `ConvexPolyhedron` for contact and
+      plotting; if `inertia` is None it is computed from the shape as a uniform solid (about
+      the shape's centre: give `inertia` for a shape with an `offset`).
 
     `mass` and `inertia` are array leaves: differentiate or vmap over them freely. Concrete
     values are validated on construction (mass > 0, finite; inertia symmetric, positive

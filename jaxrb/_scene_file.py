@@ -11,8 +11,10 @@ The format is documented, field by field, in the annotated example shipped with 
 - `title`, `description`: optional strings.
 - `[body]`: `mass` (kg, required); `inertia` (kg m^2 about the mass centre, body axes: three
   principal moments or a 3x3 tensor; optional when a shape is given); `[body.shape]` with
-  `type` = "box" (`half_extents`), "sphere" (`radius`) or "cylinder" (`radius`,
-  `half_height`).
+  `type` = "box" (`half_extents`), "sphere" (`radius`), "cylinder" (`radius`,
+  `half_height`), "polyhedron" (`vertices`: the convex hull's points, m) or "die" (`sides`
+  4, 6, 8, 12 or 20 and optional `edge`, m: a regular die of `jaxrb.dice`); every shape
+  takes an optional `offset` (m, body frame: its centre relative to the mass centre).
 - `[initial]`: `pos`, `vel` (world frame, m and m/s), `omega` (BODY frame, rad/s) and the
   attitude as one of `quat` (scalar first, body to world), `axis` + `angle_deg`, or
   `euler_deg` + `sequence` (e.g. "313": R = R_a(phi1) R_b(phi2) R_c(phi3), moving axes).
@@ -312,6 +314,20 @@ _TOP = ("title", "description", "body", "initial", "forces", "floor", "joint", "
 _SOLVERS = ("tsit5", "dopri5", "dopri8")
 
 
+def _vertices(t: "_Table"):
+    raw = t.data.get("vertices")
+    if not isinstance(raw, list) or not 4 <= len(raw) <= 200:
+        t.fail("vertices", f"must be a list of 4 to 200 [x, y, z] points, got {_short(raw)}")
+    points = []
+    for i, p in enumerate(raw):
+        ok = isinstance(p, list) and len(p) == 3
+        ok = ok and all(isinstance(x, int | float) and not isinstance(x, bool) for x in p)
+        if not ok or not all(math.isfinite(_float(x)) for x in p):
+            t.fail("vertices", f"point {i} must be 3 finite numbers, got {_short(p)}")
+        points.append([float(x) for x in p])
+    return np.asarray(points)
+
+
 def _shape(body: _Table):
     import jaxrb
 
@@ -321,26 +337,39 @@ def _shape(body: _Table):
     kind = raw.get("type") if isinstance(raw, dict) else None
     kind = kind if isinstance(kind, str) else None
     known = {
-        "box": ("type", "half_extents"),
-        "sphere": ("type", "radius"),
-        "cylinder": ("type", "radius", "half_height"),
+        "box": ("type", "half_extents", "offset"),
+        "sphere": ("type", "radius", "offset"),
+        "cylinder": ("type", "radius", "half_height", "offset"),
+        "polyhedron": ("type", "vertices", "offset"),
+        "die": ("type", "sides", "edge", "offset"),
     }
     t = _Table(
         raw,
         "[body.shape]",
         body.source,
-        known.get(kind, tuple({k for v in known.values() for k in v})),
+        known.get(kind, tuple({k: 0 for v in known.values() for k in v})),
     )
     kind = t.string("type", choices=tuple(known))
+    offset = t.vector("offset", default=(0.0, 0.0, 0.0))
     if kind == "box":
         half = t.vector("half_extents")
         if np.any(half <= 0):
             t.fail("half_extents", f"must all be > 0, got {half.tolist()}")
-        return t.model(None, jaxrb.Box, half)
+        return t.model(None, jaxrb.Box, half, offset)
     if kind == "sphere":
-        return t.model(None, jaxrb.Sphere, t.number("radius", positive=True))
+        return t.model(None, jaxrb.Sphere, t.number("radius", positive=True), offset)
+    if kind == "polyhedron":
+        return t.model("vertices", jaxrb.ConvexPolyhedron, _vertices(t), offset)
+    if kind == "die":
+        sides = t.integer("sides")
+        if sides not in jaxrb.dice.BUILDERS:
+            t.fail("sides", f"must be one of 4, 6, 8, 12, 20, got {sides}")
+        build = jaxrb.dice.BUILDERS[sides]
+        if t.has("edge"):
+            return t.model(None, build, t.number("edge", positive=True), offset).shape
+        return t.model(None, build, offset=offset).shape
     radius, half_height = t.number("radius", positive=True), t.number("half_height", positive=True)
-    return t.model(None, jaxrb.Cylinder, radius, half_height)
+    return t.model(None, jaxrb.Cylinder, radius, half_height, offset)
 
 
 def _body(root: _Table):

@@ -3,7 +3,8 @@
 One table maps a shape class to its contact model (as MJX maps a geometry pair to a
 collision function); a shape without an entry is an error, never treated as another shape.
 
-Frames: body points and normals are in the body frame (m). `down` is the floor's normal in
+Frames: body points and normals are in the body frame (m), from the mass centre: a shape's
+`offset` is added to its points. `down` is the floor's normal in
 the body frame, d = R(q)^T n: a body point p is at height n . x + d . p above the plane
 through the mass centre parallel to the floor, so the lowest point of a curve minimises d . p.
 """
@@ -15,6 +16,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._polyhedron import ConvexPolyhedron
 from .._quaternion import _safe_norm
 from .._shapes import AbstractShape, Box, Cylinder, Sphere
 
@@ -81,12 +83,14 @@ class AbstractContactModel(eqx.Module):
 
 
 class SphereContact(AbstractContactModel):
-    """A ball: one contact point, its lowest point -radius d."""
+    """A ball: one contact point, its lowest point offset - radius d."""
 
     radius: jnp.ndarray
+    offset: jnp.ndarray
 
     def __init__(self, shape: Sphere):
         self.radius = shape.radius
+        self.offset = shape.offset
         self.num_points = 1
         self.point_features = (0,)
         self.flat_points = (False,)
@@ -94,7 +98,7 @@ class SphereContact(AbstractContactModel):
         self.face_points = ()
 
     def points(self, down, seed):
-        return (-self.radius * down)[None, :]
+        return (self.offset - self.radius * down)[None, :]
 
     def face_frame(self):
         z = jnp.zeros((0, 3), self.radius.dtype)
@@ -151,14 +155,29 @@ def _polygon_mean_distance(vertices, centre):
     return total / area
 
 
-class BoxContact(AbstractContactModel):
-    """A cuboid: its 8 corners, 12 edges and 6 rectangular faces."""
+class CornerContact(AbstractContactModel):
+    """A solid whose contact points are its corners (fixed on the body) and whose faces are
+    polygons: `corners` (P, 3); per face its outward `normals`, `centres` and friction radii
+    `rho` (body frame, m)."""
 
-    half_extents: jnp.ndarray
     corners: jnp.ndarray
     normals: jnp.ndarray
     centres: jnp.ndarray
     rho: jnp.ndarray
+
+    moving_points = False
+
+    def points(self, down, seed):
+        return self.corners
+
+    def face_frame(self):
+        return self.normals, self.centres, self.rho
+
+
+class BoxContact(CornerContact):
+    """A cuboid: its 8 corners, 12 edges and 6 rectangular faces."""
+
+    half_extents: jnp.ndarray
 
     def __init__(self, shape: Box):
         a = shape.half_extents
@@ -168,24 +187,16 @@ class BoxContact(AbstractContactModel):
         self.flat_points = (False,) * 8
         self.pairs = _BOX_EDGES
         self.face_points = _BOX_FACES
-        self.corners = jnp.asarray(_BOX_SIGNS, a.dtype) * a
+        self.corners = jnp.asarray(_BOX_SIGNS, a.dtype) * a + shape.offset
         eye = jnp.eye(3, dtype=a.dtype)
         self.normals = jnp.stack([sign * eye[axis] for axis, sign in _BOX_FACE_AXES])
-        self.centres = self.normals * a
+        self.centres = self.normals * a + shape.offset
         self.rho = jnp.stack(
             [
                 _polygon_mean_distance(self.corners[jnp.asarray(ring)], c)
                 for ring, c in zip(_BOX_FACES, self.centres, strict=True)
             ]
         )
-
-    moving_points = False
-
-    def points(self, down, seed):
-        return self.corners
-
-    def face_frame(self):
-        return self.normals, self.centres, self.rho
 
     def cop_margin(self, face, normal_force, couple):
         # the face of `axis` is bounded by |x_j| <= a_j, |x_k| <= a_k; the centre of pressure
@@ -209,10 +220,12 @@ class CylinderContact(AbstractContactModel):
 
     radius: jnp.ndarray
     half_height: jnp.ndarray
+    offset: jnp.ndarray
 
     def __init__(self, shape: Cylinder):
         self.radius = shape.radius
         self.half_height = shape.half_height
+        self.offset = shape.offset
         self.num_points = 4
         self.point_features = (0, 1)
         self.flat_points = (False, False, True, True)
@@ -244,7 +257,8 @@ class CylinderContact(AbstractContactModel):
         u = self.rim_direction(down, seed)
         r, h = self.radius, self.half_height
         ez = jnp.array([0.0, 0.0, 1.0], down.dtype)
-        return jnp.stack([-r * u + h * ez, -r * u - h * ez, r * u + h * ez, r * u - h * ez])
+        corners = jnp.stack([-r * u + h * ez, -r * u - h * ez, r * u + h * ez, r * u - h * ez])
+        return corners + self.offset
 
     def impact_points(self, down, seed):
         # per cap: its lowest rim point, its highest, and the two half-way between, which
@@ -254,14 +268,14 @@ class CylinderContact(AbstractContactModel):
         r = self.radius
         h = self.half_height * jnp.array([0.0, 0.0, 1.0], down.dtype)
         ring = jnp.stack([-r * u, r * u, r * side, -r * side])
-        everything = jnp.concatenate([ring + h, ring - h])
+        everything = jnp.concatenate([ring + h, ring - h]) + self.offset
         flat = jnp.asarray([False, True, True, True] * 2)
         return everything, flat
 
     def face_frame(self):
         dtype = self.radius.dtype
         normals = jnp.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]], dtype)
-        centres = normals * self.half_height
+        centres = normals * self.half_height + self.offset
         rho = jnp.full((2,), 2.0 / 3.0, dtype) * self.radius  # disc, uniform pressure
         return normals, centres, rho
 
@@ -269,7 +283,73 @@ class CylinderContact(AbstractContactModel):
         return normal_force * self.radius - _safe_norm(couple)
 
 
-CONTACT_MODELS = {Sphere: SphereContact, Box: BoxContact, Cylinder: CylinderContact}
+def _polygon_centroid(vertices):
+    """Area centroid (3,) of the planar convex polygon `vertices` (K, 3)."""
+    v0 = vertices[0]
+    centre, area = 0.0, 0.0
+    for k in range(1, vertices.shape[0] - 1):
+        a = 0.5 * _safe_norm(jnp.cross(vertices[k] - v0, vertices[k + 1] - v0))
+        centre = centre + a * (v0 + vertices[k] + vertices[k + 1]) / 3
+        area = area + a
+    return centre / area
+
+
+class PolyhedronContact(CornerContact):
+    """A convex polyhedron: its corners, edges and polygonal faces.
+
+    A face's centre is its area centroid; its support region for the centre of pressure is
+    the polygon, bounded by the edge lines m_k . (x - c) <= h_k (m_k the in-plane outward
+    normal of edge k, h_k its distance from the centre c).
+    """
+
+    edge_normals: jnp.ndarray  # (F, K, 3), K the most edges of a face (padded)
+    edge_distances: jnp.ndarray  # (F, K)
+    edge_used: tuple = eqx.field(static=True)  # (F, K) which of the K slots are edges
+
+    def __init__(self, shape: ConvexPolyhedron):
+        v = shape.vertices
+        faces = shape.faces
+        self.num_points = v.shape[0]
+        self.point_features = tuple(range(self.num_points))
+        self.flat_points = (False,) * self.num_points
+        self.pairs = shape.edges
+        self.face_points = faces
+        self.corners = v + shape.offset
+        self.normals = shape.face_normals()
+        K = max(len(f) for f in faces)
+        centres, rhos, m_all, h_all, used = [], [], [], [], []
+        for f, nu in zip(faces, self.normals, strict=True):
+            ring = v[jnp.asarray(f)]
+            c = _polygon_centroid(ring)
+            centres.append(c)
+            rhos.append(_polygon_mean_distance(ring, c))
+            edge = jnp.roll(ring, -1, axis=0) - ring
+            m = jnp.cross(edge, nu)
+            m = m / _safe_norm(m, keepdims=True)
+            h = jnp.sum(m * (ring - c), axis=1)
+            pad = K - len(f)
+            m_all.append(jnp.concatenate([m, jnp.zeros((pad, 3), v.dtype)]))
+            h_all.append(jnp.concatenate([h, jnp.zeros(pad, v.dtype)]))
+            used.append((True,) * len(f) + (False,) * pad)
+        self.centres = jnp.stack(centres) + shape.offset
+        self.rho = jnp.stack(rhos)
+        self.edge_normals = jnp.stack(m_all)
+        self.edge_distances = jnp.stack(h_all)
+        self.edge_used = tuple(used)
+
+    def cop_margin(self, face, normal_force, couple):
+        offset_times_n = jnp.cross(couple, self.normals[face])  # N * (CoP - centre)
+        inside = normal_force * self.edge_distances[face]
+        margins = inside - self.edge_normals[face] @ offset_times_n
+        return jnp.min(jnp.where(jnp.asarray(self.edge_used)[face], margins, jnp.inf))
+
+
+CONTACT_MODELS = {
+    Sphere: SphereContact,
+    Box: BoxContact,
+    Cylinder: CylinderContact,
+    ConvexPolyhedron: PolyhedronContact,
+}
 """The contact model of each shape class (`contact_model` looks a shape up here)."""
 
 

@@ -122,9 +122,10 @@ class CandidateTable:
         on_a_face = [np.any(np.all(~a | faces, axis=1)) for a in self.active]
         if model.num_faces and all(on_a_face):
             # per face: the modes whose points all lie on it (FLIGHT among them)
-            self.groups = np.stack(
-                [np.flatnonzero(np.all(~self.active | f, axis=1)) for f in faces]
-            )
+            # faces with fewer corners than the largest repeat FLIGHT (the last mode)
+            groups = [np.flatnonzero(np.all(~self.active | f, axis=1)) for f in faces]
+            size = max(len(g) for g in groups)
+            self.groups = np.stack([np.pad(g, (0, size - len(g)), mode="edge") for g in groups])
             self.group_faces = faces
         else:
             self.groups = np.arange(len(rows))[None, :]

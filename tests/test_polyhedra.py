@@ -1,0 +1,311 @@
+"""Convex polyhedra and the regular dice: the hull, mass properties against published closed
+forms and a Monte Carlo estimate, face numbers and outcomes, shape offsets, and polyhedral
+dice thrown onto the floor with the contact engine."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxrb
+from jaxrb import dice
+from jaxrb.contact._features import contact_model
+from jaxrb.contact._modes import CandidateTable
+
+PHI = (1 + 5**0.5) / 2
+# published moments of inertia about the centroid (isotropic), per unit mass and edge a = 1,
+# and volumes per a^3
+MOMENTS = {4: 1 / 20, 6: 1 / 6, 8: 1 / 10, 12: (95 + 39 * 5**0.5) / 300, 20: (3 + 5**0.5) / 20}
+VOLUMES = {
+    4: 1 / (6 * 2**0.5),
+    6: 1.0,
+    8: 2**0.5 / 3,
+    12: (15 + 7 * 5**0.5) / 4,
+    20: 5 * (3 + 5**0.5) / 12,
+}
+COUNTS = {4: (4, 6, 4), 6: (8, 12, 6), 8: (6, 12, 8), 12: (20, 30, 12), 20: (12, 30, 20)}
+
+
+@pytest.mark.parametrize("sides", [4, 6, 8, 12, 20])
+def test_regular_dice_mass_properties_against_closed_forms(sides):
+    edge, mass = 0.013, 0.007
+    die = dice.BUILDERS[sides](edge)
+    shape = die.shape
+    assert (len(shape.vertices), len(shape.edges), len(shape.faces)) == COUNTS[sides]
+    lengths = [np.linalg.norm(shape.vertices[i] - shape.vertices[j]) for i, j in shape.edges]
+    np.testing.assert_allclose(lengths, edge, rtol=1e-13)
+    np.testing.assert_allclose(float(shape.volume), VOLUMES[sides] * edge**3, rtol=1e-13)
+    inertia = np.asarray(jaxrb.RigidBody(mass, shape=shape).inertia_matrix)
+    np.testing.assert_allclose(
+        inertia, MOMENTS[sides] * mass * edge**2 * np.eye(3), rtol=1e-13, atol=1e-13 * edge**2
+    )
+    np.testing.assert_allclose(np.mean(np.asarray(shape.vertices), axis=0), 0.0, atol=1e-16)
+
+
+def test_random_hull_against_monte_carlo():
+    """Volume, centroid and inertia of a random hull against 4e6 uniform samples (the
+    tolerance is 5 standard errors of each Monte Carlo estimate)."""
+    rng = np.random.default_rng(7)
+    points = rng.normal(size=(25, 3)) * np.array([1.0, 0.6, 0.3]) + np.array([0.5, -0.2, 0.1])
+    shape = jaxrb.ConvexPolyhedron(points)
+    vertices = np.asarray(shape.vertices)
+    normals = np.asarray(shape.face_normals())
+    offsets = np.array([n @ vertices[f[0]] for n, f in zip(normals, shape.faces, strict=True)])
+    # Euler's formula, and every vertex a point given (moved by the centroid shift)
+    assert len(vertices) - len(shape.edges) + len(shape.faces) == 2
+    shift = points[np.argmin(points[:, 0])] - vertices[np.argmin(vertices[:, 0])]
+    assert np.all(np.min(np.linalg.norm(points[:, None] - (vertices + shift), axis=-1), 0) < 1e-12)
+
+    lo, hi = vertices.min(0), vertices.max(0)
+    n = 4_000_000
+    x = lo + (hi - lo) * rng.random((n, 3))
+    inside = np.all(x @ normals.T <= offsets, axis=1)
+    box = np.prod(hi - lo)
+    frac = inside.mean()
+    volume = box * frac
+    assert abs(float(shape.volume) - volume) < 5 * box * np.sqrt(frac * (1 - frac) / n)
+    xin = x[inside]
+    centroid_se = xin.std(0) / np.sqrt(len(xin))
+    assert np.all(np.abs(xin.mean(0)) < 5 * centroid_se)  # the shape is about its centroid
+    mass = 2.0
+    r2 = np.sum(xin**2, axis=1)
+    samples = r2[:, None, None] * np.eye(3) - xin[:, :, None] * xin[:, None, :]
+    mc = mass * samples.mean(0)
+    se = mass * samples.std(0) / np.sqrt(len(xin))
+    inertia = np.asarray(shape.inertia(mass))
+    assert np.all(np.abs(inertia - mc) < 5 * se + 1e-12), (inertia - mc) / se
+
+
+def test_hull_drops_inner_and_edge_points_and_refuses_flat_sets():
+    cube = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
+    extra = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.2, 0.3, -0.1]])
+    shape = jaxrb.ConvexPolyhedron(np.concatenate([extra, cube]))
+    assert len(shape.vertices) == 8 and len(shape.faces) == 6
+    assert all(len(f) == 4 for f in shape.faces)
+    np.testing.assert_allclose(float(shape.volume), 8.0, rtol=1e-14)
+    with pytest.raises(ValueError, match="one plane"):
+        jaxrb.ConvexPolyhedron([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]])
+    with pytest.raises(ValueError, match="4 to 200 vertices"):
+        jaxrb.ConvexPolyhedron([[0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    with pytest.raises(ValueError, match="finite"):
+        jaxrb.ConvexPolyhedron([[0, 0, np.nan], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    with pytest.raises(ValueError, match="offset must be finite"):
+        jaxrb.ConvexPolyhedron(cube, offset=(0.0, np.inf, 0.0))
+    with pytest.raises(ValueError, match="edge must be finite and > 0"):
+        dice.d20(-0.01)
+
+
+@pytest.mark.parametrize("sides", [4, 6, 8, 12, 20])
+def test_face_numbers_and_outcomes(sides):
+    die = dice.BUILDERS[sides]()
+    assert sorted(die.numbers) == list(range(1, sides + 1))
+    normals = np.asarray(die.shape.face_normals())
+    if sides != 4:  # opposite faces sum to n + 1
+        for i, n in enumerate(normals):
+            j = int(np.argmin(normals @ n))
+            assert die.numbers[i] + die.numbers[j] == sides + 1
+    # turn each face to the outcome's direction: the die shows that face's number
+    target = np.array([0.0, 0.0, -1.0 if sides == 4 else 1.0])
+    quats = []
+    for n in normals:
+        axis = np.cross(n, target)
+        angle = np.arctan2(np.linalg.norm(axis), n @ target)
+        axis = axis if np.linalg.norm(axis) > 1e-12 else np.array([1.0, 0.0, 0.0])
+        quats.append(jaxrb.axis_angle_to_quat(jnp.asarray(axis), angle))
+    quats = jnp.stack(quats)
+    np.testing.assert_array_equal(np.asarray(die.outcome(quats)), die.numbers)
+    np.testing.assert_allclose(np.asarray(die.face_alignment(quats)), 1.0, atol=1e-14)
+
+
+def test_offsets_move_support_points_and_contact_points():
+    offset = jnp.array([0.001, -0.002, 0.003])
+    q = jaxrb.axis_angle_to_quat(jnp.array([0.3, 1.0, -0.2]), 0.9)
+    pos = jnp.array([0.1, 0.2, 0.05])
+    pairs = [
+        (jaxrb.Sphere(0.01), jaxrb.Sphere(0.01, offset)),
+        (jaxrb.Box((0.01, 0.02, 0.005)), jaxrb.Box((0.01, 0.02, 0.005), offset)),
+        (jaxrb.Cylinder(0.01, 0.002), jaxrb.Cylinder(0.01, 0.002, offset)),
+        (dice.d8().shape, dice.d8(offset=offset).shape),
+    ]
+    down = jaxrb.quat_rotate(jaxrb.quat_conjugate(q), jnp.array([0.0, 0.0, -1.0]))
+    for centred, moved in pairs:
+        np.testing.assert_allclose(
+            moved.support_point(down), centred.support_point(down) + offset, atol=1e-16
+        )
+        lift = float(jaxrb.quat_rotate(q, offset)[2])
+        np.testing.assert_allclose(
+            float(moved.floor_distance(pos, q)),
+            float(centred.floor_distance(pos, q)) + lift,
+            atol=1e-16,
+        )
+        a, b = contact_model(centred), contact_model(moved)
+        seed = jnp.array([1.0, 0.0, 0.0])
+        np.testing.assert_allclose(b.points(down, seed), a.points(down, seed) + offset, atol=1e-16)
+        np.testing.assert_allclose(b.face_frame()[1], a.face_frame()[1] + offset, atol=1e-16)
+        # the uniform solid's inertia about its centre does not depend on the offset
+        np.testing.assert_allclose(moved.inertia(1.0), centred.inertia(1.0), atol=0)
+    with pytest.raises(ValueError, match="Sphere.offset must be finite"):
+        jaxrb.Sphere(0.01, (0.0, np.nan, 0.0))
+
+
+def test_polyhedron_face_support_regions():
+    """The centre-of-pressure margin of a polygonal face is >= 0 exactly inside the polygon:
+    for the cube it equals the box's, and for a random hull with faces of several sizes the
+    candidate table pads its groups."""
+    box = contact_model(jaxrb.Box((0.008, 0.008, 0.008)))
+    cube = contact_model(dice.d6().shape)
+    rng = np.random.default_rng(3)
+    for f, nu in enumerate(np.asarray(cube.normals)):
+        g = int(np.argmax(np.asarray(box.normals) @ nu))
+        for _ in range(5):
+            couple = jnp.asarray(rng.normal(size=3) * 0.01)
+            couple = couple - (couple @ nu) * nu  # in the face plane
+            np.testing.assert_allclose(
+                float(cube.cop_margin(f, 2.0, couple)),
+                float(box.cop_margin(g, 2.0, couple)),
+                rtol=1e-12,
+                atol=1e-15,
+            )
+    model = contact_model(jaxrb.ConvexPolyhedron(rng.normal(size=(30, 3))))
+    sizes = {len(f) for f in model.face_points}
+    table = CandidateTable(model)
+    assert table.groups.shape[0] == model.num_faces
+    if len(sizes) > 1:  # faces of several sizes: smaller groups end in repeated FLIGHT
+        assert np.all(table.kind[table.groups[:, -1]] == 0)
+
+
+THROWS = 3
+
+
+@jax.jit
+def _throw_d12(omegas, quats, vels):
+    die = dice.d12()
+    scene = jaxrb.Scene(
+        jaxrb.RigidBody(0.005, shape=die.shape),
+        forces=(jaxrb.Gravity(),),
+        floor=jaxrb.Floor(0.5, 0.3),
+    )
+    ts = jnp.linspace(0.0, 1.5, 151)
+
+    def run(omega, quat, vel):
+        state0 = jaxrb.make_state(pos=(0.0, 0.0, 0.1), quat=quat, vel=vel, omega=omega)
+        return jaxrb.simulate(scene, state0, ts, throw=False, max_impacts=160)
+
+    return jax.vmap(run)(omegas, quats, vels)
+
+
+def test_thrown_d12_settles_on_a_face(getkey):
+    """A d12 (pentagonal faces, 20 corners) thrown at random: never below the floor (1e-9 m),
+    energy never rises beyond the tolerances, at rest at the end on a face, by the dynamics
+    alone (the benchmark `contact_throws --shapes d4,d8,d12,d20` throws hundreds)."""
+    die = dice.d12()
+    scene = jaxrb.Scene(
+        jaxrb.RigidBody(0.005, shape=die.shape),
+        forces=(jaxrb.Gravity(),),
+        floor=jaxrb.Floor(0.5, 0.3),
+    )
+    omegas = jax.random.normal(getkey(), (THROWS, 3)) * 15.0
+    quats = jaxrb.quat_normalize(jax.random.normal(getkey(), (THROWS, 4)))
+    vels = jax.random.normal(getkey(), (THROWS, 3)) * 0.5
+    batch = _throw_d12(omegas, quats, vels)
+    assert np.all(np.asarray(batch.result._value) == jaxrb.RESULTS.successful._value)
+    assert np.all(np.asarray(batch.impacts.count) > 3)
+    log = batch.contact
+    lift = float(scene.body.mass) * 9.81 * 1e-9  # m g contact_tol (docs/contact.md)
+    assert np.all(np.asarray(log.max_energy_rise) <= lift)
+    assert np.all(np.asarray(log.max_penetration) < 1e-9)
+    dist = jax.vmap(jax.vmap(die.shape.floor_distance))(batch.states.pos, batch.states.quat)
+    assert float(jnp.min(dist)) > -1e-9
+    energy = np.asarray(jax.vmap(lambda s: jaxrb.energy(scene, s))(batch.states))
+    assert np.max(np.diff(energy, axis=1)) < 1e-9 * np.max(energy)
+    assert np.all(np.asarray(log.kind[:, -1]) == jaxrb.contact.KIND_NAMES.index("face"))
+    assert np.max(np.abs(np.asarray(batch.states.vel[:, -1]))) < 1e-8
+    assert np.max(np.abs(np.asarray(batch.states.omega[:, -1]))) < 1e-6
+    final = batch.states.quat[:, -1]
+    np.testing.assert_allclose(np.asarray(die.face_alignment(final)), 1.0, atol=1e-12)
+    inradius = min(
+        float(n @ die.shape.vertices[f[0]])
+        for n, f in zip(die.shape.face_normals(), die.shape.faces, strict=True)
+    )
+    np.testing.assert_allclose(np.asarray(batch.states.pos[:, -1, 2]), inradius, atol=1e-9)
+
+
+def test_unknown_shape_in_a_floor_scene_is_an_error():
+    class Blob(jaxrb.AbstractShape):
+        offset: jnp.ndarray
+
+        def __init__(self):
+            self.offset = jnp.zeros(3)
+
+        def requirements(self):
+            return ()
+
+        def inertia(self, mass):
+            return mass * jnp.eye(3)
+
+        def support_point(self, direction):
+            return direction
+
+    scene = jaxrb.Scene(
+        jaxrb.RigidBody(1.0, shape=Blob()), forces=(jaxrb.Gravity(),), floor=jaxrb.Floor(0.5)
+    )
+    with pytest.raises(TypeError, match="no contact model for shape Blob"):
+        jaxrb.simulate(scene, jaxrb.make_state(pos=(0, 0, 1.0)), jnp.linspace(0.0, 0.1, 3))
+
+
+def test_scene_files_take_dice_polyhedra_and_offsets():
+    from jaxrb._scene_file import SceneFileError, loads_scene
+
+    head = "[simulation]\nt_end = 1.0\n[floor]\nrestitution = 0.5\n[initial]\npos = [0, 0, 0.1]\n"
+    spec = loads_scene(head + '[body]\nmass = 0.005\n[body.shape]\ntype = "die"\nsides = 20\n')
+    assert isinstance(spec.scene.body.shape, jaxrb.ConvexPolyhedron)
+    assert len(spec.scene.body.shape.faces) == 20
+    text = (
+        head
+        + "[body]\nmass = 0.005\ninertia = [1e-7, 1e-7, 1e-7]\n[body.shape]\n"
+        + 'type = "polyhedron"\noffset = [0.0, 0.0, 0.001]\n'
+        + "vertices = [[0, 0, 0.01], [0.01, 0, -0.01], [-0.01, 0.01, -0.01],"
+        + " [-0.01, -0.01, -0.01]]\n"
+    )
+    shape = loads_scene(text).scene.body.shape
+    assert len(shape.faces) == 4
+    np.testing.assert_allclose(np.asarray(shape.offset), [0.0, 0.0, 0.001])
+    with pytest.raises(SceneFileError, match=r"\[body.shape\].sides: must be one of 4, 6, 8"):
+        loads_scene(head + '[body]\nmass = 0.005\n[body.shape]\ntype = "die"\nsides = 7\n')
+    flat = "vertices = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]\n"
+    with pytest.raises(SceneFileError, match=r"\[body.shape\].vertices: .*one plane"):
+        loads_scene(head + '[body]\nmass = 1.0\n[body.shape]\ntype = "polyhedron"\n' + flat)
+
+
+def test_tippe_top_conserves_jelletts_integral():
+    """A tippe top: a ball of radius R whose mass centre G lies a below its centre C (shape
+    offset a e3, inertia diag(I1, I1, I3)), spinning on the floor with Coulomb friction.
+
+    Jellett's integral L . r (L the angular momentum about G, r from G to the contact point,
+    r = a e3 - R z) is conserved while it slides and while it rolls: dL/dt = r x F (gravity
+    acts at G) is normal to r, and L . dr/dt = L . (w x a e3) = 0 for a symmetric body, since
+    L lies in the plane of w and e3. The top first slides (its contact point slips at
+    R w3 sin(tilt)) and then rolls."""
+    R, a, m = 0.02, 0.003, 0.015
+    I3 = 0.4 * m * R**2
+    inertia = jnp.array([0.9 * I3, 0.9 * I3, I3])
+    body = jaxrb.RigidBody(m, inertia, shape=jaxrb.Sphere(R, offset=(0.0, 0.0, a)))
+    scene = jaxrb.Scene(body, (jaxrb.Gravity(),), floor=jaxrb.Floor(0.0, 0.05))
+    q = jaxrb.axis_angle_to_quat(jnp.array([1.0, 0.0, 0.0]), 0.1)
+    pos = jnp.array([0.0, 0.0, R]) - jaxrb.quat_rotate(q, jnp.array([0.0, 0.0, a]))
+    state0 = jaxrb.make_state(pos=pos, quat=q, omega=(0.0, 0.0, 150.0))
+    ts = jnp.linspace(0.0, 0.5, 101)
+    traj = jaxrb.simulate(scene, state0, ts, rtol=1e-10, atol=1e-10, max_impacts=8)
+    assert int(traj.impacts.count) == 0
+    sliding = np.asarray(traj.contact.sliding)
+    assert sliding.sum() >= 10 and not sliding[-1]  # slides for a while, then rolls
+    Rm = np.asarray(jaxrb.quat_to_matrix(traj.states.quat))
+    L = np.einsum("tij,j,tj->ti", Rm, np.asarray(inertia), np.asarray(traj.states.omega))
+    r = Rm[:, :, 2] * a - np.array([0.0, 0.0, R])
+    jellett = np.sum(L * r, axis=1)
+    np.testing.assert_allclose(jellett, jellett[0], rtol=1e-8)
+    gaps = jax.vmap(body.shape.floor_distance)(traj.states.pos, traj.states.quat)
+    assert float(jnp.max(jnp.abs(gaps))) < 1e-9  # the ball stays on the floor
+    energy = np.asarray(jaxrb.energy(scene, traj.states))
+    assert np.all(np.diff(energy) < 1e-12 * energy[0])  # friction only takes energy
+    assert energy[-1] < energy[0]
