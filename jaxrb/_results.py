@@ -34,6 +34,10 @@ class RESULTS(dfx.RESULTS):  # pyright: ignore
     invalid_friction = "the floor's friction coefficient must be finite and >= 0."
     max_impacts_reached = "the maximum number of impacts was reached before the end time."
     max_events_reached = "the maximum number of contact events was reached before the end time."
+    painleve_paradox = (
+        "the Painlevé paradox: a sliding contact's normal force problem has no solution "
+        "(Coulomb friction too large for the body's attitude); the run stops there."
+    )
     starts_below_floor = (
         "the body starts below the floor (its lowest point is under the floor plane)."
     )

@@ -19,6 +19,8 @@ from ._hull import hull_faces
 from ._polyhedron import ConvexPolyhedron, face_normals
 from ._quaternion import quat_rotate
 
+__all__ = ["Die", "d4", "d6", "d8", "d12", "d20", "BUILDERS"]
+
 _PHI = (1 + 5**0.5) / 2
 
 

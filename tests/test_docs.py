@@ -20,7 +20,7 @@ pytest.importorskip("mkdocs_jupyter", reason="the docs test needs the [test] ext
 pytest.importorskip("mkdocstrings_handlers.python", reason="the docs test needs the [test] extra")
 
 ROOT = Path(__file__).resolve().parent.parent
-SUBPACKAGES = ("analytic", "contact", "fit", "inertia", "plotting")  # each has its API page
+SUBPACKAGES = ("analytic", "contact", "dice", "fit", "inertia", "plotting")  # each has its API page
 
 
 @pytest.fixture(scope="module")
@@ -58,6 +58,7 @@ def test_site_builds(site):
     for page in ("index", "cli/index", "scene-files/index", "theory/index", "contact/index"):
         assert (site / f"{page}.html").is_file(), page
     assert (site / "img" / "contact_throws.png").is_file()
+    assert (site / "img" / "contact_throws_polyhedra.png").is_file()
 
 
 def test_api_reference_covers_public_api(site):

@@ -275,37 +275,3 @@ def test_scene_files_take_dice_polyhedra_and_offsets():
     flat = "vertices = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]\n"
     with pytest.raises(SceneFileError, match=r"\[body.shape\].vertices: .*one plane"):
         loads_scene(head + '[body]\nmass = 1.0\n[body.shape]\ntype = "polyhedron"\n' + flat)
-
-
-def test_tippe_top_conserves_jelletts_integral():
-    """A tippe top: a ball of radius R whose mass centre G lies a below its centre C (shape
-    offset a e3, inertia diag(I1, I1, I3)), spinning on the floor with Coulomb friction.
-
-    Jellett's integral L . r (L the angular momentum about G, r from G to the contact point,
-    r = a e3 - R z) is conserved while it slides and while it rolls: dL/dt = r x F (gravity
-    acts at G) is normal to r, and L . dr/dt = L . (w x a e3) = 0 for a symmetric body, since
-    L lies in the plane of w and e3. The top first slides (its contact point slips at
-    R w3 sin(tilt)) and then rolls."""
-    R, a, m = 0.02, 0.003, 0.015
-    I3 = 0.4 * m * R**2
-    inertia = jnp.array([0.9 * I3, 0.9 * I3, I3])
-    body = jaxrb.RigidBody(m, inertia, shape=jaxrb.Sphere(R, offset=(0.0, 0.0, a)))
-    scene = jaxrb.Scene(body, (jaxrb.Gravity(),), floor=jaxrb.Floor(0.0, 0.05))
-    q = jaxrb.axis_angle_to_quat(jnp.array([1.0, 0.0, 0.0]), 0.1)
-    pos = jnp.array([0.0, 0.0, R]) - jaxrb.quat_rotate(q, jnp.array([0.0, 0.0, a]))
-    state0 = jaxrb.make_state(pos=pos, quat=q, omega=(0.0, 0.0, 150.0))
-    ts = jnp.linspace(0.0, 0.5, 101)
-    traj = jaxrb.simulate(scene, state0, ts, rtol=1e-10, atol=1e-10, max_impacts=8)
-    assert int(traj.impacts.count) == 0
-    sliding = np.asarray(traj.contact.sliding)
-    assert sliding.sum() >= 10 and not sliding[-1]  # slides for a while, then rolls
-    Rm = np.asarray(jaxrb.quat_to_matrix(traj.states.quat))
-    L = np.einsum("tij,j,tj->ti", Rm, np.asarray(inertia), np.asarray(traj.states.omega))
-    r = Rm[:, :, 2] * a - np.array([0.0, 0.0, R])
-    jellett = np.sum(L * r, axis=1)
-    np.testing.assert_allclose(jellett, jellett[0], rtol=1e-8)
-    gaps = jax.vmap(body.shape.floor_distance)(traj.states.pos, traj.states.quat)
-    assert float(jnp.max(jnp.abs(gaps))) < 1e-9  # the ball stays on the floor
-    energy = np.asarray(jaxrb.energy(scene, traj.states))
-    assert np.all(np.diff(energy) < 1e-12 * energy[0])  # friction only takes energy
-    assert energy[-1] < energy[0]

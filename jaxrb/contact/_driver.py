@@ -158,6 +158,7 @@ def _simulate_contact(
         zeno_merges=jnp.array(0, jnp.int32),
         energy_guards=jnp.array(0, jnp.int32),
         inconsistent=jnp.array(0, jnp.int32),
+        ambiguous=jnp.array(0, jnp.int32),
         max_energy_rise=jnp.zeros((), dtype),
         max_penetration=jnp.zeros((), dtype),
         event_time=jnp.full(options.max_events + 1, jnp.inf, dtype),
@@ -207,6 +208,7 @@ def _simulate_contact(
             zeno_merges=log["zeno_merges"] + count(out.merged),
             energy_guards=log["energy_guards"] + count(out.guarded),
             inconsistent=log["inconsistent"] + count(out.inconsistent),
+            ambiguous=log["ambiguous"] + count(out.ambiguous),
             max_energy_rise=jnp.maximum(
                 log["max_energy_rise"], jnp.where(do, out.energy_rise, 0.0)
             ),
@@ -224,10 +226,13 @@ def _simulate_contact(
         put("event_cause", cause_of(carry["trigger"], model))
         put("event_kind", out.mode.kind)
         put("event_sliding", _sliding(out.mode))
-        mode = jax.tree.map(lambda a, b: jnp.where(do, a, b), out.mode, carry["mode"])
-        y = jax.tree.map(lambda a, b: jnp.where(do, a, b), out.state, carry["y"])
+        # the Painlevé paradox: no contact force exists; the run stops at the state reached
+        paradox = do & out.painleve
+        moves_on = do & ~paradox
+        mode = jax.tree.map(lambda a, b: jnp.where(moves_on, a, b), out.mode, carry["mode"])
+        y = jax.tree.map(lambda a, b: jnp.where(moves_on, a, b), out.state, carry["y"])
         offsets = start_offsets(values(t0, y, mode), cond_tol)
-        done = done | too_many
+        done = done | too_many | paradox
         t0 = jnp.where(done, t_end, t0)
         sol = dfx.diffeqsolve(
             term,
@@ -263,6 +268,9 @@ def _simulate_contact(
         result = RESULTS.where(failed & (result == RESULTS.successful), res, result)
         result = RESULTS.where(
             too_many & (result == RESULTS.successful), RESULTS.max_impacts_reached, result
+        )
+        result = RESULTS.where(
+            paradox & (result == RESULTS.successful), RESULTS.painleve_paradox, result
         )
         moved = ~done & ~failed
         return dict(

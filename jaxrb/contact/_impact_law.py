@@ -207,9 +207,14 @@ def solve_impacts(state, geom, points, touching, scene, tol):
     # the touching points, gathered into the first slots in an order set by where they are
     # (along a fixed direction of the floor), not by how the shape numbers them: where the
     # impulses are not unique (a face on four corners, with friction) the solution the
-    # sweeps settle on depends on the slots' order, and so the outcome would
+    # sweeps settle on depends on the slots' order, and so the outcome would depend on the
+    # numbering too. Where more points touch than there are slots (a
+    # d12's pentagon lands flat), the slots take those that approach fastest: a point left
+    # out must not be one that still approaches (it would be hit again at once, unresolved)
     where = points @ (t1 + 0.6180339887498949 * t2)
-    order = jnp.argsort(jnp.where(touching, where, jnp.inf))[:SLOTS]
+    rate = (state.vel + cross(geom.w, points)) @ n
+    chosen = jnp.lexsort((where, jnp.where(touching, rate, jnp.inf)))[:SLOTS]
+    order = chosen[jnp.argsort(jnp.where(touching[chosen], where[chosen], jnp.inf))]
     present = touching[order]
     r = points[order]
     J, minv, W = _jacobians(body, R, r, n, t1, t2)

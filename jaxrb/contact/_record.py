@@ -76,7 +76,10 @@ class ContactLog(eqx.Module):
     - `energy_guards`: how often Newton's law with friction would have added energy and the
       frictionless impulse was used instead.
     - `inconsistent`: how often no candidate mode satisfied every contact condition (the
-      least inconsistent one was taken: the Painlevé paradox, or a boundary case).
+      least inconsistent one was taken: a boundary case; where it is the Painlevé paradox,
+      the run stops with `RESULTS.painleve_paradox`).
+    - `ambiguous`: how often a sliding contact's normal force problem had two solutions
+      (the other side of the Painlevé paradox) and the contact lifting off was taken.
     - `max_energy_rise`: the largest rise (J) of the energy across any event (roundoff).
     - `max_penetration`: the deepest (m) any contact point was below the floor at an event.
     - `kind`: (T,) the contact mode at each save time: 0 flight, 1 point, 2 pair (an edge or
@@ -91,6 +94,7 @@ class ContactLog(eqx.Module):
     zeno_merges: jax.Array
     energy_guards: jax.Array
     inconsistent: jax.Array
+    ambiguous: jax.Array
     max_energy_rise: jax.Array
     max_penetration: jax.Array
     kind: jax.Array

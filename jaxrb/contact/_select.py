@@ -11,6 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._linalg import solve as small_solve
 from .._quaternion import _safe_norm
 from ._events import AXIAL, CONE_A, CONE_B, COP, NORMAL_A, NORMAL_B, UNUSED, conditions
 from ._modes import (
@@ -28,6 +29,8 @@ from ._modes import (
 FIXED_POINT_ITERATIONS = 4
 DIRECTIONS = 64  # angles scanned for a sliding direction from rest
 REFINEMENTS = 10  # regula falsi steps on the chosen bracket
+NEWTON_ITERATIONS = 8  # for the two directions of a pair whose ends both slide from rest
+MAX_NEWTON_STEP = 0.5  # rad
 
 
 def scan_direction(measure, n, t1, t2, dtype):
@@ -78,6 +81,35 @@ def scan_direction(measure, n, t1, t2, dtype):
     return jnp.cos(phi) * t1 + jnp.sin(phi) * t2, found
 
 
+def newton_directions(measure, seeds, dtype):
+    """Two sliding directions from rest at once (the ends of a pair), as angles x = (x_a,
+    x_b) in the floor plane: damped Newton (Levenberg-Marquardt, finite-difference Jacobian)
+    on the turning rates r(x) = ((a_a x s_a) . n, (a_b x s_b) . n) from each of `seeds`
+    (S, 2). `measure(x)` -> (r (2,), a_i . s_i (2,), whether the forces are admissible).
+    Returns the angles with the smallest |r| among the admissible ends with a_i . s_i >= 0,
+    and whether such a root was found (|r| below 1e-6 of the accelerations' scale)."""
+    h = jnp.sqrt(jnp.finfo(dtype).eps)
+    probe = jnp.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]], dtype) * h
+
+    def newton(_, x):
+        r, _, _ = jax.vmap(measure)(x + probe)
+        J = (r[1:] - r[0]).T / h  # J[:, k] = dr / dx_k
+        JtJ, g = J.T @ J, J.T @ r[0]
+        damping = 1e-10 * jnp.trace(JtJ) + jnp.finfo(dtype).tiny
+        a, b, d = JtJ[0, 0] + damping, JtJ[0, 1], JtJ[1, 1] + damping
+        step = -jnp.stack([d * g[0] - b * g[1], a * g[1] - b * g[0]]) / (a * d - b * b)
+        size = jnp.max(jnp.abs(step))
+        return x + step * jnp.minimum(1.0, MAX_NEWTON_STEP / jnp.maximum(size, 1e-300))
+
+    xs = jax.vmap(lambda x0: jax.lax.fori_loop(0, NEWTON_ITERATIONS, newton, x0))(seeds)
+    r, along, admissible = jax.vmap(measure)(xs)
+    size = jnp.max(jnp.abs(r), axis=1)
+    scale = jnp.max(jnp.abs(along), axis=1) + 1.0
+    good = admissible & jnp.all(along >= 0, axis=1)
+    best = jnp.argmin(jnp.where(good, size / scale, jnp.inf))
+    return xs[best], good[best] & (size[best] <= 1e-6 * scale[best])
+
+
 def point_sliding_direction(b, K, mu, n, t1, t2):
     """`scan_direction` for a single point contact at rest, in closed form: with the contact
     point's acceleration a = b + K f under the contact force f = lambda_n (n - mu s),
@@ -95,10 +127,31 @@ def point_sliding_direction(b, K, mu, n, t1, t2):
 
 
 class Choice(eqx.Module):
-    """The chosen mode and whether it satisfied every condition."""
+    """The chosen mode, whether it satisfied every condition, and whether the sliding
+    contact problem had no solution (`painleve`) or several (`ambiguous`): the Painlevé
+    paradox (docs/contact.md, section 3)."""
 
     mode: object
     consistent: jax.Array
+    painleve: jax.Array
+    ambiguous: jax.Array
+
+
+def not_p_matrix(sol, mode, body) -> jax.Array:
+    """Whether the normal forces of a point or pair mode respond to themselves the wrong way:
+    the matrix that maps the normal forces (with the friction of a sliding contact riding on
+    them) to the normal accelerations, the other rows held, is not a P-matrix. Then the
+    sliding contact problem has no solution for some free accelerations and two for others
+    (the Painlevé paradox). Tested on its inverse, a block of the rows' inverse matrix."""
+    rows = sol.rows
+    A = rows.J @ inverse_mass_columns(body, sol.geom.R, rows.C).T
+    eye = jnp.eye(A.shape[0], dtype=A.dtype)
+    A = jnp.where(rows.mask[:, None] & rows.mask[None, :], A, eye)
+    Y = jax.vmap(lambda e: small_solve(A, e))(eye[:2])  # Y[k] = A^-1 e_k
+    y00, y11, y01, y10 = Y[0, 0], Y[1, 1], Y[1, 0], Y[0, 1]
+    single = y00 > 0
+    both = (y00 > 0) & (y11 > 0) & (y00 * y11 - y01 * y10 > 0)
+    return ~jnp.where(mode.kind == PAIR, both, single)
 
 
 def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip):
@@ -175,6 +228,40 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip):
         jnp.where(exact_b, end_dir, hats0[1]),
         hats0[2],
     )
+    # a pair whose ends both start from rest: both directions at once, by Newton from the
+    # directions opposite to the friction sticking would need and from those across and
+    # along the line (rigidity ties the two ends' slips along it, and a line that slides
+    # sideways as a whole has both ends sliding across it)
+    n, t1, t2 = geom.n, geom.t1, geom.t2
+    line = unit_or(geom.tangential(geom.r[mode.b] - geom.r[mode.a]), t1)
+    angle = lambda s: jnp.arctan2(s @ t2, s @ t1)  # noqa: E731
+    across, along_line = angle(cross(n, line)), angle(line)
+    seeds = jnp.stack(
+        [
+            jnp.stack([angle(hats0[0]), angle(hats0[1])]),
+            jnp.stack([across, across]),
+            jnp.stack([across + jnp.pi, across + jnp.pi]),
+            jnp.stack([along_line, along_line]),
+            jnp.stack([along_line + jnp.pi, along_line + jnp.pi]),
+        ]
+    )
+    on_floor = lambda x: jnp.cos(x) * t1 + jnp.sin(x) * t2  # noqa: E731
+
+    def pair_measure(x):
+        sa, sb = on_floor(x[0]), on_floor(x[1])
+        sol = solve((sa, sb, hats0[2]))
+        acc = geom.tangential(sol.point_accelerations())
+        aa, ab = acc[mode.a], acc[mode.b]
+        turning = jnp.stack([cross(aa, sa) @ n, cross(ab, sb) @ n])
+        return turning, jnp.stack([aa @ sa, ab @ sb]), (sol.lam[0] >= 0) & (sol.lam[1] >= 0)
+
+    pair_x, pair_found = newton_directions(pair_measure, seeds, dtype)
+    exact_pair = pair & rest_a & rest_b & pair_found
+    hats0 = (
+        jnp.where(exact_pair, on_floor(pair_x[0]), hats0[0]),
+        jnp.where(exact_pair, on_floor(pair_x[1]), hats0[1]),
+        hats0[2],
+    )
     small = 1e-6 * (1.0 + _safe_norm(held.acc))  # slip accelerations below this: keep the seed
 
     def slip_rates(sol):
@@ -190,8 +277,8 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip):
         sol = solve(hats)
         sa, sb, st = slip_rates(sol)
         followed = (
-            follow(rest_a & ~exact_a, sa, hats[0]),
-            follow(rest_b & ~exact_b, sb, hats[1]),
+            follow(rest_a & ~exact_a & ~exact_pair, sa, hats[0]),
+            follow(rest_b & ~exact_b & ~exact_pair, sb, hats[1]),
             follow(rest_f, st, hats[2]),
         )
         return followed, hats, sol
@@ -231,7 +318,13 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip):
         ~mode.stick[0] | (jnp.linalg.norm(twist) <= tol.slip_stop),
         ~(mode.stick[0] & ~zero_slip[mode.a]) & ~(mode.stick[1] & ~zero_slip[mode.b]),
     )
-    return chosen, jnp.concatenate([gap_margin, force, align]), still
+    # the Painlevé paradox: a contact that slides (not from rest) on a normal problem that
+    # is not a P-matrix
+    slides = ((mode.kind == POINT) | (mode.kind == PAIR)) & (
+        (~mode.stick[0] & ~rest_a) | ((mode.kind == PAIR) & ~mode.stick[1] & ~rest_b)
+    )
+    paradox = slides & not_p_matrix(sol, mode, scene.body)
+    return chosen, jnp.concatenate([gap_margin, force, align]), still, paradox
 
 
 def exclusions(table, candidates, model, old, trigger):
@@ -276,12 +369,25 @@ def select_mode(t, state, geom, old, trigger, scene, model, table, tol, resting,
         mode = table.mode(i, old)
         return _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip)
 
-    modes, margins, still = jax.vmap(one)(candidates)
+    modes, margins, still, paradox = jax.vmap(one)(candidates)
     t_active = jnp.asarray(table.active)[candidates]
     admissible = jnp.all(~t_active | resting, axis=1) & still
     admissible = admissible & ~exclusions(table, candidates, model, old, trigger)
     violation = jnp.max(jnp.maximum(-margins, 0.0), axis=1)
     ok = admissible & (violation <= tol.force)
     any_ok = jnp.any(ok)
-    i = jnp.where(any_ok, jnp.argmax(ok), jnp.argmin(jnp.where(admissible, violation, jnp.inf)))
-    return Choice(mode=jax.tree.map(lambda x: x[i], modes), consistent=any_ok)
+    # the Painlevé paradox: with no consistent mode, a sliding contact on a normal problem
+    # that is not a P-matrix has no solution; a consistent mode of that kind has a rival (the
+    # contact lifting off), and the mode without it is taken
+    paradox = admissible & paradox
+    painleve = ~any_ok & jnp.any(paradox)
+    plain = ok & ~paradox
+    ambiguous = any_ok & jnp.any(ok & paradox) & jnp.any(plain)
+    first = jnp.where(jnp.any(plain), jnp.argmax(plain), jnp.argmax(ok))
+    i = jnp.where(any_ok, first, jnp.argmin(jnp.where(admissible, violation, jnp.inf)))
+    return Choice(
+        mode=jax.tree.map(lambda x: x[i], modes),
+        consistent=any_ok,
+        painleve=painleve,
+        ambiguous=ambiguous,
+    )

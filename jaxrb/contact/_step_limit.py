@@ -21,9 +21,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ._modes import active_points, no_derivative, solve_mode, unit_state
+from ._modes import FLIGHT, active_points, no_derivative, solve_mode, unit_state
 
 SHRINK = 0.5  # k: the fraction of a gap a step may close
+STABLE_STEPS = 1.0  # beta h: the longest step in a contact mode, in units of 1 / beta
 
 
 def gap_step_limit(t, y, mode, offsets, scene, model, tol) -> jax.Array:
@@ -46,7 +47,12 @@ def gap_step_limit(t, y, mode, offsets, scene, model, tol) -> jax.Array:
     h = 2.0 * room / (speed + jnp.sqrt(speed**2 + 2.0 * acc * room))
     h_points = jnp.where(free, h, jnp.inf)
     h_floor = jnp.sqrt(2.0 * tol.contact / jnp.max(jnp.where(free, acc, jnp.finfo(dtype).tiny)))
-    return jnp.maximum(jnp.min(h_points), h_floor)
+    h = jnp.maximum(jnp.min(h_points), h_floor)
+    # a mode that holds the body relaxes its drift at the rate beta: an explicit solver
+    # stepping far beyond 1 / beta is unstable there, and a body at rest would rock at the
+    # level of the tolerances instead of staying put
+    steady = STABLE_STEPS / tol.stabilisation if tol.stabilisation else jnp.inf
+    return jnp.where(mode.kind == FLIGHT, h, jnp.minimum(h, steady))
 
 
 class GapLimitedSteps(dfx.AbstractStepSizeController):

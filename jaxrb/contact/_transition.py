@@ -35,8 +35,10 @@ class EventOutcome(eqx.Module):
     `point` (m, world), `speed` (largest approach speed, m/s) and `energy_lost` (J) describe
     it. `merged`: the bounce series was replaced by its limit, which would have ended at
     `rest_time`. `guarded`: the frictionless impulse replaced one that would add energy.
-    `inconsistent`: no candidate mode met every condition. `energy_rise` (J, >= 0) and
-    `penetration` (m, >= 0) are for the log.
+    `inconsistent`: no candidate mode met every condition. `painleve`: because a sliding
+    contact's normal problem has no solution (the Painlevé paradox); `ambiguous`: it had two,
+    and the contact lifting off was taken. `energy_rise` (J, >= 0) and `penetration` (m,
+    >= 0) are for the log.
     """
 
     state: State
@@ -50,6 +52,8 @@ class EventOutcome(eqx.Module):
     rest_time: jax.Array
     guarded: jax.Array
     inconsistent: jax.Array
+    painleve: jax.Array
+    ambiguous: jax.Array
     energy_rise: jax.Array
     penetration: jax.Array
 
@@ -155,6 +159,8 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol) -> EventOutcom
         rest_time=rest_time,
         guarded=impact & guarded,
         inconsistent=~choice.consistent | (impact & ~hit.consistent),
+        painleve=choice.painleve,
+        ambiguous=choice.ambiguous,
         energy_rise=jnp.maximum(energy1 - energy0, 0.0),
         penetration=penetration,
     )
