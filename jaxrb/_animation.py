@@ -125,6 +125,7 @@ def animate(traj, scene, path=None, *, fps=20, max_frames=60, view="world", trai
     size = max(float(np.max(np.abs(np.concatenate(faces)))), 1e-9)
     frames = np.unique(np.linspace(0, len(ts) - 1, min(max_frames, len(ts))).round().astype(int))
     floor_z = float(scene.floor.height) if scene.floor is not None else None
+    floor_n = np.asarray(scene.floor.normal, float) if scene.floor is not None else None
     anchor = None
     if scene.joint is not None:
         anchor = pos[0] + R[0] @ np.asarray(scene.joint.point, float)
@@ -161,7 +162,11 @@ def animate(traj, scene, path=None, *, fps=20, max_frames=60, view="world", trai
         if floor_z is not None:
             (x0, x1), (y0, y1) = lims[0], lims[1]
             corners = [[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
-            floor.set_verts([np.array([[x, y, floor_z] for x, y in corners])])
+            # the plane n . (p - (0, 0, h)) = 0 over the view (a tilted floor's normal has
+            # n_z > 0 wherever it can carry a body under gravity)
+            nx, ny, nz = floor_n
+            z = [floor_z - (nx * x + ny * y) / max(nz, 1e-6) for x, y in corners]
+            floor.set_verts([np.array([[x, y, zz] for (x, y), zz in zip(corners, z, strict=True)])])
 
     half = 3 * size
     set_view(limits)

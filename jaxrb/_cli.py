@@ -143,6 +143,7 @@ _INPUT_RESULTS = (
     "invalid_force",
     "invalid_joint",
     "invalid_floor_height",
+    "invalid_floor_normal",
     "invalid_tolerances",
     "invalid_restitution",
     "invalid_friction",

@@ -1,40 +1,72 @@
-"""The floor: a horizontal plane z = height that bodies bounce on."""
+"""The floor: a plane that bodies bounce, slide, roll and rest on; level, or tilted by its
+normal."""
 
 import equinox as eqx
 import jax.numpy as jnp
 
-from ._checks import Requirement, finite, finite_nonnegative, raise_unmet
+from ._checks import Requirement, as_float_array, finite, finite_nonnegative, raise_unmet
+from ._quaternion import unit_vector
 
 
 class Floor(eqx.Module):
-    """A horizontal plane z = `height` (m) with Newton's restitution and Coulomb friction.
+    """The plane through (0, 0, `height`) with the unit normal `normal` (world frame; default
+    up: the level floor z = `height`), with Newton's restitution and Coulomb friction. Bodies
+    stay on the side the normal points to; gravity keeps its own direction (a tilted floor is
+    an incline).
 
     **Arguments:**
 
     - `restitution`: Newton's coefficient chi in [0, 1]: the contact point's normal velocity
       after impact is -chi times the one before.
     - `friction`: Coulomb coefficient mu >= 0 for the tangential impulse (|j_t| <= mu j_n).
-    - `height`: the floor's world z (m).
+    - `height`: (m) the world z where the plane crosses the z axis.
+    - `normal`: the plane's normal (any non-zero length; stored unit), pointing out of the
+      floor into the space the body moves in. A plane tilted by the angle theta about the y
+      axis, rising towards -x, is `normal=(sin theta, 0, cos theta)`.
     """
 
     restitution: jnp.ndarray
     friction: jnp.ndarray
     height: jnp.ndarray
+    normal: jnp.ndarray
 
-    def __init__(self, restitution, friction=0.0, height=0.0):
+    def __init__(self, restitution, friction=0.0, height=0.0, normal=(0.0, 0.0, 1.0)):
         self.restitution = jnp.asarray(restitution, dtype=float)
         self.friction = jnp.asarray(friction, dtype=float)
         self.height = jnp.asarray(height, dtype=float)
+        normal = as_float_array(normal, "normal", (3,))
+        unit = unit_vector(normal)  # NaN for a zero normal: flagged by `requirements`
+        raise_unmet(
+            "Floor", (Requirement("normal", normal, "a finite non-zero direction", finite(unit)),)
+        )
+        self.normal = unit
 
     def requirements(self) -> tuple[Requirement, ...]:
         """Conditions on the floor's parameters: a ValueError naming the field for concrete
         values where the floor is made, a result flag in `simulate` for traced ones."""
-        e, mu, h = self.restitution, self.friction, self.height
+        e, mu, h, n = self.restitution, self.friction, self.height, self.normal
         return (
             Requirement("restitution", e, "in [0, 1]", (e >= 0) & (e <= 1)),
             Requirement("friction", mu, "finite and >= 0", finite_nonnegative(mu)),
             Requirement("height", h, "finite", finite(h)),
+            Requirement("normal", n, "a finite non-zero direction", jnp.all(finite(n))),
         )
 
     def __check_init__(self):
         raise_unmet("Floor", self.requirements())
+
+    def frame(self, dtype=float):
+        """The unit normal n and a tangent basis t1, t2 (world, t1 x t2 = n): t1 is the world
+        x axis projected onto the plane (the y axis where the normal is nearly along x), so
+        the level floor has (e_z, e_x, e_y)."""
+        n = self.normal.astype(dtype)
+        eye = jnp.eye(3, dtype=dtype)
+        seed = jnp.where(jnp.abs(n[0]) < 0.9, eye[0], eye[1])
+        t1 = seed - (seed @ n) * n
+        t1 = t1 / jnp.linalg.norm(t1)
+        return n, t1, jnp.cross(n, t1)
+
+    def gap(self, points):
+        """Signed distance (m) of world `points` (..., 3) above the plane (negative below)."""
+        n = self.normal.astype(points.dtype)
+        return points @ n - n[2] * self.height.astype(points.dtype)

@@ -48,6 +48,7 @@ def _floor_checks(floor):
         "restitution": RESULTS.invalid_restitution,
         "friction": RESULTS.invalid_friction,
         "height": RESULTS.invalid_floor_height,
+        "normal": RESULTS.invalid_floor_normal,
     }
     return [(jnp.all(r.ok), codes[r.field]) for r in floor.requirements()]
 

@@ -26,6 +26,7 @@ class RESULTS(dfx.RESULTS):  # pyright: ignore
     )
     invalid_joint = "the joint's point must be finite and its axis a finite non-zero direction."
     invalid_floor_height = "the floor's height must be finite."
+    invalid_floor_normal = "the floor's normal must be a finite non-zero direction."
     invalid_tolerances = (
         "the solver settings are invalid (rtol and atol must be finite and >= 0, not both 0; "
         "dt0 finite and > 0)."

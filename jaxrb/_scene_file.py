@@ -21,7 +21,8 @@ The format is documented, field by field, in the annotated example shipped with 
 - `[[forces]]`: tables with `type` = "gravity" (`g`), "linear_drag" (`coefficient`),
   "quadratic_drag" (`coefficient`, or `rho`, `drag_coefficient`, `area`), "damping_moment"
   (`linear`, `quadratic`), "wrench" (`force`, `torque`, `point`, `frame`).
-- `[floor]`: `restitution` in [0, 1], `friction` >= 0, `height` (m).
+- `[floor]`: `restitution` in [0, 1], `friction` >= 0, `height` (m), and optionally `normal`
+  (a tilted plane through (0, 0, height): its normal, world frame; default [0, 0, 1]).
 - `[joint]`: `type` = "pivot" or "hinge", `point` (body frame, m), `axis` (hinge). A joint
   fixes part of the initial motion: `[initial].vel`, if given, must equal the velocity the
   joint gives the mass centre, and a hinge's `omega` must lie along its axis; anything else
@@ -494,14 +495,20 @@ def _above_floor(root: _Table, init: _Table | None, scene, state0):
         return
     height = float(scene.floor.height)
     quat = jaxrb.quat_normalize(state0.quat)
+    normal = scene.floor.normal
     with np.errstate(all="ignore"):
-        gap = float(scene.body.shape.floor_distance(state0.pos, quat, height))
+        gap = float(scene.body.shape.floor_distance(state0.pos, quat, height, normal))
     tolerance = ContactOptions().resolved(state0.pos.dtype).contact
     if not gap < -tolerance:
         return
     problem = (
         f"the body starts below the [floor]: its lowest point is {-gap:.3g} m under the "
-        f"plane z = {height:g} m (raise pos[2] or lower [floor].height)"
+        + (
+            f"plane z = {height:g} m"
+            if float(normal[2]) == 1.0
+            else f"tilted plane through (0, 0, {height:g}) m"
+        )
+        + " (raise pos[2] or lower [floor].height)"
     )
     if init is None or not init.has("pos"):
         root.fail("initial", problem)
@@ -623,15 +630,19 @@ def _forces(root: _Table):
 def _floor(root: _Table):
     import jaxrb
 
-    floor = root.table("floor", ("restitution", "friction", "height"), default=None)
+    floor = root.table("floor", ("restitution", "friction", "height", "normal"), default=None)
     if floor is None:
         return None
+    normal = floor.vector("normal", default=(0.0, 0.0, 1.0))
+    if not np.any(normal):
+        floor.fail("normal", "must be a non-zero direction, got [0, 0, 0]")
     return floor.model(
-        None,
+        "normal",
         jaxrb.Floor,
         floor.number("restitution", lo=0.0, hi=1.0),
         floor.number("friction", 0.0, nonnegative=True),
         floor.number("height", 0.0),
+        normal,
     )
 
 

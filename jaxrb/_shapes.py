@@ -49,19 +49,26 @@ class AbstractShape(eqx.Module):
         """The point of the solid (body frame, from the mass centre, m) furthest along the
         body-frame `direction`."""
 
-    def lowest_point(self, quat: Quat) -> Vec3:
-        """Body-frame point of the solid with the smallest world z at attitude `quat`."""
-        down_in_body = quat_rotate(quat_conjugate(quat), jnp.array([0.0, 0.0, -1.0], quat.dtype))
+    def lowest_point(self, quat: Quat, normal=None) -> Vec3:
+        """Body-frame point of the solid with the smallest world z (or, given a world
+        `normal`, the smallest height along it) at attitude `quat`."""
+        up = jnp.array([0.0, 0.0, 1.0], quat.dtype) if normal is None else normal
+        down_in_body = quat_rotate(quat_conjugate(quat), -jnp.asarray(up, quat.dtype))
         return self.support_point(down_in_body)
 
-    def floor_distance(self, pos: Vec3, quat: Quat, height=0.0) -> jnp.ndarray:
-        """Signed distance (m) of the solid's lowest point above the floor z = `height`.
+    def floor_distance(self, pos: Vec3, quat: Quat, height=0.0, normal=None) -> jnp.ndarray:
+        """Signed distance (m) of the solid's lowest point above the floor z = `height`, or
+        above the plane through (0, 0, `height`) with the unit world `normal` (a tilted
+        `Floor`'s `normal`).
 
         Negative when the solid penetrates the floor. `pos` is the mass centre (world frame),
         `quat` the unit attitude quaternion (scalar first, body to world).
         """
-        lowest = quat_rotate(quat, self.lowest_point(quat))
-        return pos[..., 2] + lowest[..., 2] - height
+        lowest = pos + quat_rotate(quat, self.lowest_point(quat, normal))
+        if normal is None:
+            return lowest[..., 2] - height
+        n = jnp.asarray(normal, pos.dtype)
+        return lowest @ n - n[2] * height
 
 
 class Sphere(AbstractShape):

@@ -79,7 +79,7 @@ def simulate_contact(
     if throw and concrete:
         d0 = float(
             scene.body.shape.floor_distance(
-                state0.pos, quat_normalize(state0.quat), scene.floor.height
+                state0.pos, quat_normalize(state0.quat), scene.floor.height, scene.floor.normal
             )
         )
         if d0 < -tol.contact:
@@ -128,7 +128,7 @@ def _simulate_contact(
     t_end = ts[-1]
     T = ts.shape[0]
     y0 = unit_state(state0)
-    d0 = scene.body.shape.floor_distance(y0.pos, y0.quat, scene.floor.height)
+    d0 = scene.body.shape.floor_distance(y0.pos, y0.quat, scene.floor.height, scene.floor.normal)
     result = RESULTS.where(
         (result == RESULTS.successful) & (d0 < -tol.contact), RESULTS.starts_below_floor, result
     )

@@ -196,8 +196,7 @@ class Geometry(eqx.Module):
 
 def floor_frame(floor, dtype):
     """Unit normal n and tangent basis (t1, t2) of the floor (world), t1 x t2 = n."""
-    eye = jnp.eye(3, dtype=dtype)
-    return eye[2], eye[0], eye[1]
+    return floor.frame(dtype)
 
 
 def geometry(state: State, scene, model, seed) -> Geometry:
@@ -218,7 +217,7 @@ def geometry(state: State, scene, model, seed) -> Geometry:
     w = R @ state.omega
     r = p @ R.T
     r_dot = cross(w, r) + p_dot @ R.T
-    gap = (state.pos + r) @ n - scene.floor.height
+    gap = scene.floor.gap(state.pos + r)
     vel = state.vel + cross(w, r)
     gap_rate = vel @ n
     slip = vel - gap_rate[:, None] * n
@@ -289,7 +288,7 @@ def _with_face_rows(state, geom, mode, hat_f, mu, scene, model, point_rows):
     rc = R @ centres[mode.face]
     f_d = jnp.stack([n, zero3, zero3, t1, t2, zero3])
     f_k = jnp.stack([zero3, t1, t2, zero3, zero3, n])
-    centre_gap = (state.pos + rc) @ n - scene.floor.height
+    centre_gap = scene.floor.gap(state.pos + rc)
     # d/dt (nu_w . t2) = w . t1 and d/dt (-nu_w . t1) = w . t2 near nu_w = -n
     f_pos = jnp.stack([centre_gap, nu_w @ t2, -(nu_w @ t1), zero, zero, zero])
     slide_force = n - mu * (hat_f[0] * t1 + hat_f[1] * t2)

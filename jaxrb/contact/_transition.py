@@ -79,7 +79,7 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol) -> EventOutcom
     # the impact points (a coin's caps: rings of rim points) and which of them touch
     body_points, ring = model.impact_points(geom.R.T @ geom.n, mode.seed)
     points = body_points @ geom.R.T
-    points_gap = (state.pos + points) @ geom.n - scene.floor.height
+    points_gap = scene.floor.gap(state.pos + points)
     points_rate = (state.vel + cross(geom.w, points)) @ geom.n
     hitting = points_gap <= jnp.where(ring, tol.flat, tol.contact)
     approaching = hitting & (points_rate < -tol.slip_stop)

@@ -50,7 +50,7 @@ class _ContactResiduals(eqx.Module):
 
     def __call__(self, z, args):
         e, mu = self.physical(z)
-        floor = Floor(e, mu, self.scene.floor.height)
+        floor = Floor(e, mu, self.scene.floor.height, self.scene.floor.normal)
         scene = Scene(self.scene.body, self.scene.forces, floor=floor)
         traj = simulate(
             scene,
