@@ -8,18 +8,25 @@ a rerun with the same fingerprint loads finished chunks instead of recomputing t
 after an interruption), and a directory holding a different sweep is refused, never
 overwritten.
 
-Devices: `devices=jax.devices()` (or a `jax.sharding.Mesh` with one axis) shards each chunk
-along its leading axis with `NamedSharding(mesh, P(axis))`; JAX is the distributed engine.
-On several hosts, call `jax.distributed.initialize()` in every process first, build the mesh
-from `jax.devices()` (all hosts' devices) and run the same `sweep` call in every process:
-each chunk is then one global array spread over all hosts (give every process its own
-`directory`, or only write from `jax.process_index() == 0`).
+Devices: `devices=jax.local_devices()` (or a `jax.sharding.Mesh` with one axis) shards each
+chunk along its leading axis with `NamedSharding(mesh, P(axis))` over one process's devices.
+
+Processes (several hosts, or several processes on one): start every process with
+`jax.distributed.initialize(coordinator_address, num_processes, process_id)` (on a cluster
+with a scheduler JAX knows, no arguments are needed), then run the same
+`sweep(..., directory=SHARED, processes=True)` in every one of them. Process p computes
+chunks p, p + P, p + 2P, ... on its own devices and writes them to the shared directory (a
+filesystem every process sees); every process then waits for all the chunks and returns the
+whole sweep. The processes share nothing but the directory (no collective operations), so a
+slow or restarted process only delays the others, and a rerun resumes from the chunks on
+disk. On GPU hosts, start one process per host (its `devices` its local GPUs) or one per GPU.
 """
 
 import functools
 import hashlib
 import json
 import os
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -107,6 +114,21 @@ def _write_atomic(path, write):
     os.replace(tmp, path)
 
 
+def _wait_for(paths, timeout, what):
+    """Wait until every file in `paths` exists (written by other processes)."""
+    deadline = time.monotonic() + timeout
+    missing = [p for p in paths if not os.path.exists(p)]
+    while missing:
+        if time.monotonic() > deadline:
+            names = ", ".join(os.path.basename(p) for p in missing[:5])
+            raise TimeoutError(
+                f"sweep: waited {timeout:g} s for {what} of the other processes; missing "
+                f"{len(missing)}: {names}"
+            )
+        time.sleep(0.1)
+        missing = [p for p in missing if not os.path.exists(p)]
+
+
 def sweep(
     fn: Callable,
     inputs: Any,
@@ -117,6 +139,8 @@ def sweep(
     progress: bool = True,
     tag: str = "",
     callback: Callable | None = None,
+    processes: bool = False,
+    wait_timeout: float = 86400.0,
 ) -> Any:
     """Evaluate `fn` on every row of `inputs`, vmapped and chunked; optionally resumable/sharded.
 
@@ -139,6 +163,11 @@ def sweep(
       fingerprint cannot see: only its name).
     - `callback`: called as `callback(index, outputs)` after each newly computed chunk
       (NumPy outputs); an exception there stops the sweep after that chunk was saved.
+    - `processes`: split the chunks among the JAX processes (`jax.distributed`; module
+      docstring): needs a `directory` that every process sees; each process computes its
+      share and returns the whole sweep once every chunk is on disk.
+    - `wait_timeout`: (s) how long a process waits for the others' chunks before raising
+      `TimeoutError` naming the chunks missing.
 
     **Returns:** the outputs of `fn` stacked along a leading axis N, as NumPy arrays.
     """
@@ -158,6 +187,9 @@ def sweep(
     if int(chunk_size) < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
     mesh = _as_mesh(devices)
+    rank, size = (jax.process_index(), jax.process_count()) if processes else (0, 1)
+    if processes and directory is None:
+        raise ValueError("processes=True needs a directory that every process sees")
     chunk_size = int(chunk_size)
     d = 1 if mesh is None else mesh.devices.size
     chunk_size = min(-(-chunk_size // d) * d, -(-n // d) * d)  # a multiple of d, <= N rounded up
@@ -169,6 +201,8 @@ def sweep(
         os.makedirs(directory, exist_ok=True)
         fingerprint = _fingerprint(leaves, treedef, fn, chunk_size, tag)
         mpath = os.path.join(directory, _MANIFEST)
+        if rank > 0:  # the first process writes the manifest: wait for it
+            _wait_for([mpath], wait_timeout, "the manifest of process 0")
         if os.path.exists(mpath):
             with open(mpath) as f:
                 manifest = json.load(f)
@@ -197,13 +231,18 @@ def sweep(
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=n_chunks, desc="sweep", unit="chunk")
+        bar = tqdm(total=len(range(rank, n_chunks, size)), desc="sweep", unit="chunk")
     outputs, out_treedef = [None] * n_chunks, None
     try:
         for i in range(n_chunks):
             lo, hi = i * chunk_size, min((i + 1) * chunk_size, n)
             path = None if directory is None else _chunk_path(directory, i)
-            if manifest is not None and i in manifest["done"] and os.path.exists(path):
+            # with several processes a chunk file is written whole or not at all (atomic
+            # rename), and only the first process keeps the manifest's list
+            done = manifest is not None and (size > 1 or i in manifest["done"])
+            if i % size != rank:
+                continue  # another process's chunk: read below
+            if done and os.path.exists(path):
                 with np.load(path) as data:
                     outputs[i] = [data[f"out_{j}"] for j in range(len(data.files))]
             else:
@@ -218,8 +257,9 @@ def sweep(
                     arrays = {f"out_{j}": x for j, x in enumerate(outputs[i])}
                     _write_atomic(path, functools.partial(_savez, arrays=arrays))
                     manifest["done"] = sorted(set(manifest["done"]) | {i})
-                    mpath = os.path.join(directory, _MANIFEST)
-                    _write_atomic(mpath, lambda f: f.write(json.dumps(manifest).encode()))
+                    if rank == 0:
+                        mpath = os.path.join(directory, _MANIFEST)
+                        _write_atomic(mpath, lambda f: f.write(json.dumps(manifest).encode()))
                 if callback is not None:
                     callback(i, jax.tree.unflatten(out_treedef, outputs[i]))
             if bar is not None:
@@ -227,6 +267,16 @@ def sweep(
     finally:
         if bar is not None:
             bar.close()
+    if size > 1:  # the other processes' chunks, once they are on disk
+        others = [i for i in range(n_chunks) if i % size != rank]
+        _wait_for([_chunk_path(directory, i) for i in others], wait_timeout, "chunks")
+        for i in others:
+            with np.load(_chunk_path(directory, i)) as data:
+                outputs[i] = [data[f"out_{j}"] for j in range(len(data.files))]
+        if rank == 0:
+            manifest["done"] = list(range(n_chunks))
+            mpath = os.path.join(directory, _MANIFEST)
+            _write_atomic(mpath, lambda f: f.write(json.dumps(manifest).encode()))
     if out_treedef is None:  # everything came from disk: get the structure by tracing
         row = jax.tree.unflatten(
             treedef, [jax.ShapeDtypeStruct(x.shape[1:], x.dtype) for x in leaves]

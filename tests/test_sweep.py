@@ -1,5 +1,6 @@
 """Sweeps: chunked vmap == direct vmap, resume after interruption, refusal to overwrite,
-sharding over 4 CPU devices (subprocess) == unsharded."""
+sharding over 4 CPU devices (subprocess) == unsharded, two processes (jax.distributed) ==
+one."""
 
 import json
 import os
@@ -181,3 +182,74 @@ def test_sharded_sweep_on_4_cpu_devices_equals_unsharded(tmp_path):
         progress=False,
     )
     np.testing.assert_allclose(sharded, in_process["omega"], rtol=0, atol=1e-14)
+
+
+_PROCESS = textwrap.dedent(
+    """
+    import json, sys
+    import jax
+    jax.config.update("jax_enable_x64", True)
+    port, rank, directory = sys.argv[2], int(sys.argv[3]), sys.argv[4]
+    jax.distributed.initialize(f"localhost:{port}", num_processes=2, process_id=rank)
+    import numpy as np
+    sys.path.insert(0, sys.argv[1])
+    from test_sweep import _final_omega
+    from jaxrb._sweep import grid, sweep
+    inputs = grid(a=np.linspace(2.0, 2.5, 5), w3=np.array([1.0, 1.5, 2.0]))
+    own = []
+    out = sweep(_final_omega, inputs, chunk_size=4, directory=directory, processes=True,
+                progress=False, wait_timeout=240, callback=lambda i, _: own.append(i))
+    print(json.dumps(dict(rank=jax.process_index(), count=jax.process_count(), own=own,
+                          omega=out["omega"].tolist(), result=out["result"].tolist())))
+    jax.distributed.shutdown()
+    """
+)
+
+
+def test_sweep_split_over_two_processes_equals_one_process(tmp_path, inputs):
+    """Two JAX processes on this machine (`jax.distributed`, CPU) share a sweep through its
+    directory: each computes every other chunk, both return the whole sweep, equal to the
+    one-process sweep bit for bit."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("localhost", 0))
+        port = s.getsockname()[1]
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    env.pop("XLA_FLAGS", None)
+    here = os.path.dirname(__file__)
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-c", _PROCESS, here, str(port), str(rank), str(tmp_path)],
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for rank in (0, 1)
+    ]
+    reports = []
+    for p in procs:
+        stdout, stderr = p.communicate(timeout=300)
+        assert p.returncode == 0, stderr[-3000:]
+        reports.append(json.loads(stdout.strip().splitlines()[-1]))
+    one = sweep(_final_omega, inputs, chunk_size=4, progress=False)
+    assert [r["count"] for r in reports] == [2, 2]
+    assert [r["own"] for r in reports] == [[0, 2], [1, 3]]  # 15 rows in 4 chunks
+    for r in reports:
+        np.testing.assert_array_equal(np.array(r["omega"]), one["omega"])
+        np.testing.assert_array_equal(np.array(r["result"]), one["result"])
+    manifest = json.load(open(tmp_path / "manifest.json"))
+    assert manifest["done"] == [0, 1, 2, 3]
+    # a rerun resumes from the chunks on disk: nothing is computed again
+    computed = []
+    again = sweep(
+        _final_omega,
+        inputs,
+        chunk_size=4,
+        directory=tmp_path,
+        progress=False,
+        callback=lambda i, _: computed.append(i),
+    )
+    assert computed == []
+    np.testing.assert_array_equal(again["omega"], one["omega"])
