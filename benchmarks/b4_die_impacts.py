@@ -1,5 +1,6 @@
 # ruff: noqa: B023, E501  (closures are called inside their loop iteration; table strings)
-"""B4: a die (16 mm cube, 4.5 g) and a coin (radius 12 mm, thickness 2 mm, 7.5 g), each thrown
+"""B4: a die (16 mm cube, 4.5 g), a coin (radius 12 mm, thickness 2 mm, 7.5 g) and the regular
+d4 and d20 of `jaxrb.dice` (same density as the cube; `--n-poly` of each), each thrown
 onto the floor (restitution 0.5, Coulomb friction 0.3) under gravity, from heights U(0.1, 0.3) m with a random attitude, spin U(-30, 30) rad/s per
 body axis and horizontal speed U(-0.5, 0.5) m/s; T = 1.5 s, batch N dice (default 64: impacts
 are expensive) and N/4 coins (`--n-coins`: a coin rolls and spins on its rim with many
@@ -26,7 +27,7 @@ row is its cost per body for the same throws with its default contact (friction 
 N bodies (a box, or a cylinder for the coin) in one scene that do not collide with each other,
 and no error column.
 
-Run: python -m benchmarks.b4_die_impacts --n 64 --n-coins 16 --out bench_out
+Run: python -m benchmarks.b4_die_impacts --n 64 --n-coins 16 --n-poly 16 --out bench_out
 """
 
 import argparse
@@ -70,9 +71,16 @@ N_SAVE = 16
 _CODE_NAMES = {int(item._value): name for name, item in RESULTS._name_to_item.items()}
 
 
+POLYHEDRA = {"d4": 4, "d20": 20}  # the regular dice of jaxrb.dice, same density as the cube
+
+
 def make_scene(shape="die"):
     if shape == "die":
         body = jaxrb.RigidBody(jnp.asarray(MASS), shape=jaxrb.Box(jnp.full(3, HALF)))
+    elif shape in POLYHEDRA:
+        poly = jaxrb.dice.BUILDERS[POLYHEDRA[shape]]().shape
+        mass = MASS / (2 * HALF) ** 3 * float(poly.volume)
+        body = jaxrb.RigidBody(jnp.asarray(mass), shape=poly)
     else:
         body = jaxrb.RigidBody(jnp.asarray(COIN_MASS), shape=jaxrb.Cylinder(COIN_RADIUS, COIN_HALF))
     return jaxrb.Scene(body, forces=(jaxrb.Gravity(),), floor=jaxrb.Floor(RESTITUTION, FRICTION))
@@ -262,7 +270,10 @@ def run(n=64, dtypes=("float64", "float32"), quick=False, shape="die"):
 
 
 def mujoco_rows(states0, quick, shape="die"):
-    """Cost per body of MuJoCo's C engine on the same throws: a different (soft-contact) model."""
+    """Cost per body of MuJoCo's C engine on the same throws: a different (soft-contact) model.
+    (None for the polyhedral dice, which MuJoCo would need as mesh assets.)"""
+    if shape in POLYHEDRA:
+        return []
     try:
         import mujoco
     except ImportError:
@@ -334,15 +345,22 @@ def main(argv=None):
     p = argparse.ArgumentParser(description="B4 die and coin thrown onto the floor (impacts)")
     p.add_argument("--n", type=int, default=64, help="dice")
     p.add_argument("--n-coins", type=int, default=None, help="coins (default n / 4; 0: none)")
+    p.add_argument(
+        "--n-poly",
+        type=int,
+        default=None,
+        help="d4 and d20 dice each, beside the cube (default n / 4; 0: none)",
+    )
     p.add_argument("--dtype", choices=["float64", "float32", "both"], default="both")
     p.add_argument("--out", default=None)
     p.add_argument("--quick", action="store_true")
     a = p.parse_args(argv)
     dtypes = ("float64", "float32") if a.dtype == "both" else (a.dtype,)
     n_coins = a.n_coins if a.n_coins is not None else max(a.n // 4, 1)
+    n_poly = a.n_poly if a.n_poly is not None else max(a.n // 4, 1)
     dev = C.device_name()
     text, rows = "", []
-    for shape, n in (("die", a.n), ("coin", n_coins)):
+    for shape, n in (("die", a.n), ("coin", n_coins), ("d4", n_poly), ("d20", n_poly)):
         if n <= 0:
             continue
         shape_rows, items = run(n, dtypes, a.quick, shape)
