@@ -124,8 +124,9 @@ def animate(traj, scene, path=None, *, fps=20, max_frames=60, view="world", trai
     faces = body_faces(scene)
     size = max(float(np.max(np.abs(np.concatenate(faces)))), 1e-9)
     frames = np.unique(np.linspace(0, len(ts) - 1, min(max_frames, len(ts))).round().astype(int))
-    floor_z = float(scene.floor.height) if scene.floor is not None else None
-    floor_n = np.asarray(scene.floor.normal, float) if scene.floor is not None else None
+    plane = scene.floor is not None and not scene.floor.curved  # a bowl or cone: not drawn
+    floor_z = float(scene.floor.height) if plane else None
+    floor_n = np.asarray(scene.floor.normal, float) if plane else None
     anchor = None
     if scene.joint is not None:
         anchor = pos[0] + R[0] @ np.asarray(scene.joint.point, float)

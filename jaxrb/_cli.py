@@ -144,6 +144,8 @@ _INPUT_RESULTS = (
     "invalid_joint",
     "invalid_floor_height",
     "invalid_floor_normal",
+    "invalid_resistance",
+    "invalid_surface",
     "invalid_tolerances",
     "invalid_restitution",
     "invalid_friction",

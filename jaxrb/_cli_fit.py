@@ -895,6 +895,9 @@ def _describe_drag(res, info, g):
 
 
 def _fit_contact(data: _Data, args):
+    import equinox as eqx
+    import jax.numpy as jnp
+
     import jaxrb
     import jaxrb.fit
 
@@ -937,9 +940,7 @@ def _fit_contact(data: _Data, args):
     friction0 = None if args.friction0 is None else _positive(args.friction0, "--friction0")
     if args.fix_friction:
         if friction0 is not None:  # held at the given value instead of the scene's
-            floor = jaxrb.Floor(
-                scene.floor.restitution, friction0, scene.floor.height, scene.floor.normal
-            )
+            floor = eqx.tree_at(lambda f: f.friction, scene.floor, jnp.asarray(friction0))
             scene = jaxrb.Scene(scene.body, scene.forces, floor=floor)
         friction0 = None
     elif friction0 is None:

@@ -8,6 +8,26 @@ from ._checks import Requirement, as_float_array, finite, finite_nonnegative, ra
 from ._quaternion import unit_vector
 
 
+def set_contact_coefficients(surface, restitution, friction, rolling, spin):
+    """Store a surface's contact coefficients as float arrays (called from `__init__`)."""
+    surface.restitution = jnp.asarray(restitution, dtype=float)
+    surface.friction = jnp.asarray(friction, dtype=float)
+    surface.rolling_resistance = jnp.asarray(rolling, dtype=float)
+    surface.spin_resistance = jnp.asarray(spin, dtype=float)
+
+
+def contact_requirements(surface) -> tuple[Requirement, ...]:
+    """The conditions every surface's contact coefficients meet."""
+    e, mu = surface.restitution, surface.friction
+    mu_r, mu_s = surface.rolling_resistance, surface.spin_resistance
+    return (
+        Requirement("restitution", e, "in [0, 1]", (e >= 0) & (e <= 1)),
+        Requirement("friction", mu, "finite and >= 0", finite_nonnegative(mu)),
+        Requirement("rolling_resistance", mu_r, "finite and >= 0", finite_nonnegative(mu_r)),
+        Requirement("spin_resistance", mu_s, "finite and >= 0", finite_nonnegative(mu_s)),
+    )
+
+
 class Floor(eqx.Module):
     """The plane through (0, 0, `height`) with the unit normal `normal` (world frame; default
     up: the level floor z = `height`), with Newton's restitution and Coulomb friction. Bodies
@@ -23,16 +43,32 @@ class Floor(eqx.Module):
     - `normal`: the plane's normal (any non-zero length; stored unit), pointing out of the
       floor into the space the body moves in. A plane tilted by the angle theta about the y
       axis, rising towards -x, is `normal=(sin theta, 0, cos theta)`.
+    - `rolling_resistance`, `spin_resistance`: dimensionless coefficients mu_r, mu_s >= 0
+      (default 0) of the couples that resist a ball's (`Sphere`'s) rolling and spinning:
+      mu_r r N against the angular velocity's part along the surface and mu_s r N against
+      its part about the normal (N m; r the ball's radius, N the normal force). A ball of
+      radius r rolling on a level floor slows at 5 mu_r g / 7. See `resisting_couple`.
     """
 
     restitution: jnp.ndarray
     friction: jnp.ndarray
     height: jnp.ndarray
     normal: jnp.ndarray
+    rolling_resistance: jnp.ndarray
+    spin_resistance: jnp.ndarray
 
-    def __init__(self, restitution, friction=0.0, height=0.0, normal=(0.0, 0.0, 1.0)):
-        self.restitution = jnp.asarray(restitution, dtype=float)
-        self.friction = jnp.asarray(friction, dtype=float)
+    curved = False  # one frame for every contact (a curved surface's depends on the ball)
+
+    def __init__(
+        self,
+        restitution,
+        friction=0.0,
+        height=0.0,
+        normal=(0.0, 0.0, 1.0),
+        rolling_resistance=0.0,
+        spin_resistance=0.0,
+    ):
+        set_contact_coefficients(self, restitution, friction, rolling_resistance, spin_resistance)
         self.height = jnp.asarray(height, dtype=float)
         normal = as_float_array(normal, "normal", (3,))
         unit = unit_vector(normal)  # NaN for a zero normal: flagged by `requirements`
@@ -44,10 +80,9 @@ class Floor(eqx.Module):
     def requirements(self) -> tuple[Requirement, ...]:
         """Conditions on the floor's parameters: a ValueError naming the field for concrete
         values where the floor is made, a result flag in `simulate` for traced ones."""
-        e, mu, h, n = self.restitution, self.friction, self.height, self.normal
+        h, n = self.height, self.normal
         return (
-            Requirement("restitution", e, "in [0, 1]", (e >= 0) & (e <= 1)),
-            Requirement("friction", mu, "finite and >= 0", finite_nonnegative(mu)),
+            *contact_requirements(self),
             Requirement("height", h, "finite", finite(h)),
             Requirement("normal", n, "a finite non-zero direction", jnp.all(finite(n))),
         )
@@ -65,6 +100,15 @@ class Floor(eqx.Module):
         t1 = seed - (seed @ n) * n
         t1 = t1 / jnp.linalg.norm(t1)
         return n, t1, jnp.cross(n, t1)
+
+    def frame_at(self, centre):
+        """The frame of a contact of a body centred at `centre`: the plane's, everywhere."""
+        return self.frame(centre.dtype)
+
+    def body_distance(self, shape, pos, quat):
+        """Signed distance (m) of the shape's lowest point above the plane; `pos` the mass
+        centre (world), `quat` the unit attitude quaternion."""
+        return shape.floor_distance(pos, quat, self.height, self.normal)
 
     def gap(self, points):
         """Signed distance (m) of world `points` (..., 3) above the plane (negative below)."""

@@ -49,6 +49,10 @@ def _floor_checks(floor):
         "friction": RESULTS.invalid_friction,
         "height": RESULTS.invalid_floor_height,
         "normal": RESULTS.invalid_floor_normal,
+        "rolling_resistance": RESULTS.invalid_resistance,
+        "spin_resistance": RESULTS.invalid_resistance,
+        "radius": RESULTS.invalid_surface,
+        "inclination": RESULTS.invalid_surface,
     }
     return [(jnp.all(r.ok), codes[r.field]) for r in floor.requirements()]
 

@@ -6,10 +6,14 @@ from ._body import RigidBody
 from ._floor import Floor
 from ._forces import AbstractForce
 from ._joints import AbstractJoint
+from ._surfaces import AbstractCurvedSurface
 
 
 class Scene(eqx.Module):
-    """What is simulated: a `RigidBody`, a tuple of forces, an optional `Floor` or joint.
+    """What is simulated: a `RigidBody`, a tuple of forces, an optional floor or joint.
+
+    The floor is the surface the body meets: a plane (`Floor`), or for a `Sphere` the
+    inside of a `Bowl` or a `Cone`.
 
     The pytree structure (which forces, which joint) is static; the parameters inside
     (mass, inertia, drag coefficients, restitution...) are differentiable array leaves.
@@ -18,7 +22,7 @@ class Scene(eqx.Module):
 
     body: RigidBody
     forces: tuple[AbstractForce, ...] = ()
-    floor: Floor | None = None
+    floor: Floor | AbstractCurvedSurface | None = None
     joint: AbstractJoint | None = None
 
     def __check_init__(self):
@@ -29,5 +33,7 @@ class Scene(eqx.Module):
         for i, force in enumerate(self.forces):
             if not isinstance(force, AbstractForce):
                 raise TypeError(f"forces[{i}] is not a force model: {type(force).__name__}")
+        if self.floor is not None and not isinstance(self.floor, (Floor, AbstractCurvedSurface)):
+            raise TypeError(f"floor must be a Floor, Bowl or Cone, got {type(self.floor).__name__}")
         if self.floor is not None and self.joint is not None:
             raise ValueError("a scene may have a floor or a joint, not both")

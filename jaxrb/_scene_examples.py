@@ -16,6 +16,7 @@ EXAMPLES = {
     "coin": "coin.toml",
     "pendulum": "pendulum.toml",
     "heavy_top": "heavy_top.toml",
+    "ball_in_bowl": "ball_in_bowl.toml",
 }
 
 

@@ -21,8 +21,12 @@ The format is documented, field by field, in the annotated example shipped with 
 - `[[forces]]`: tables with `type` = "gravity" (`g`), "linear_drag" (`coefficient`),
   "quadratic_drag" (`coefficient`, or `rho`, `drag_coefficient`, `area`), "damping_moment"
   (`linear`, `quadratic`), "wrench" (`force`, `torque`, `point`, `frame`).
-- `[floor]`: `restitution` in [0, 1], `friction` >= 0, `height` (m), and optionally `normal`
-  (a tilted plane through (0, 0, height): its normal, world frame; default [0, 0, 1]).
+- `[floor]`: `restitution` in [0, 1], `friction` >= 0, `height` (m), and `type`: "plane"
+  (the default; optionally `normal`: a tilted plane through (0, 0, height), its normal,
+  world frame, default [0, 0, 1]), "bowl" (`radius`, m: the inside of a sphere whose
+  lowest point is (0, 0, height)) or "cone" (`inclination_deg` in (0, 90): the inside of
+  an upright cone with its apex at (0, 0, height)); a bowl or cone meets only a sphere.
+  Optionally `rolling_resistance` and `spin_resistance` >= 0 (a sphere's; see `Floor`).
 - `[joint]`: `type` = "pivot" or "hinge", `point` (body frame, m), `axis` (hinge). A joint
   fixes part of the initial motion: `[initial].vel`, if given, must equal the velocity the
   joint gives the mass centre, and a hinge's `omega` must lie along its axis; anything else
@@ -493,23 +497,26 @@ def _above_floor(root: _Table, init: _Table | None, scene, state0):
 
     if scene.floor is None:
         return
-    height = float(scene.floor.height)
     quat = jaxrb.quat_normalize(state0.quat)
-    normal = scene.floor.normal
     with np.errstate(all="ignore"):
-        gap = float(scene.body.shape.floor_distance(state0.pos, quat, height, normal))
+        gap = float(scene.floor.body_distance(scene.body.shape, state0.pos, quat))
     tolerance = ContactOptions().resolved(state0.pos.dtype).contact
     if not gap < -tolerance:
         return
-    problem = (
-        f"the body starts below the [floor]: its lowest point is {-gap:.3g} m under the "
-        + (
+    if isinstance(scene.floor, jaxrb.Floor):
+        height, normal = float(scene.floor.height), scene.floor.normal
+        where = (
             f"plane z = {height:g} m"
             if float(normal[2]) == 1.0
             else f"tilted plane through (0, 0, {height:g}) m"
         )
-        + " (raise pos[2] or lower [floor].height)"
-    )
+        what = f"its lowest point is {-gap:.3g} m under the {where}"
+        fix = "raise pos[2] or lower [floor].height"
+    else:
+        name = type(scene.floor).__name__.lower()
+        what = f"the ball reaches {-gap:.3g} m beyond the {name}'s surface"
+        fix = "move pos inside it"
+    problem = f"the body starts below the [floor]: {what} ({fix})"
     if init is None or not init.has("pos"):
         root.fail("initial", problem)
     init.fail("pos", problem)
@@ -627,23 +634,56 @@ def _forces(root: _Table):
     return tuple(_force(item, f"[[forces]][{i}]", root.source) for i, item in enumerate(raw))
 
 
+_FLOOR_KEYS = {
+    "plane": ("normal",),
+    "bowl": ("radius",),
+    "cone": ("inclination_deg",),
+}
+
+
 def _floor(root: _Table):
     import jaxrb
 
-    floor = root.table("floor", ("restitution", "friction", "height", "normal"), default=None)
+    common = ("type", "restitution", "friction", "rolling_resistance", "spin_resistance")
+    known = (*common, "height", *sum(_FLOOR_KEYS.values(), ()))
+    floor = root.table("floor", known, default=None)
     if floor is None:
         return None
+    kind = floor.string("type", "plane", choices=tuple(_FLOOR_KEYS))
+    for other, keys in _FLOOR_KEYS.items():
+        for key in keys:
+            if other != kind and floor.has(key):
+                floor.fail(key, f"belongs to a floor of type {other!r}, not {kind!r}")
+    contact = (
+        floor.number("restitution", lo=0.0, hi=1.0),
+        floor.number("friction", 0.0, nonnegative=True),
+    )
+    resistance = {
+        key: floor.number(key, 0.0, nonnegative=True)
+        for key in ("rolling_resistance", "spin_resistance")
+    }
+    height = floor.number("height", 0.0)
+    if kind == "bowl":
+        radius = floor.number("radius", positive=True)
+        return floor.model(
+            "radius", jaxrb.Bowl, *contact, radius=radius, height=height, **resistance
+        )
+    if kind == "cone":
+        inclination = floor.number("inclination_deg", lo=0.0, hi=90.0)
+        if not 0.0 < inclination < 90.0:
+            floor.fail("inclination_deg", f"must be in (0, 90) degrees, got {inclination:g}")
+        return floor.model(
+            "inclination_deg",
+            jaxrb.Cone,
+            *contact,
+            inclination=math.radians(inclination),
+            height=height,
+            **resistance,
+        )
     normal = floor.vector("normal", default=(0.0, 0.0, 1.0))
     if not np.any(normal):
         floor.fail("normal", "must be a non-zero direction, got [0, 0, 0]")
-    return floor.model(
-        "normal",
-        jaxrb.Floor,
-        floor.number("restitution", lo=0.0, hi=1.0),
-        floor.number("friction", 0.0, nonnegative=True),
-        floor.number("height", 0.0),
-        normal,
-    )
+    return floor.model("normal", jaxrb.Floor, *contact, height, normal, **resistance)
 
 
 def _joint(root: _Table):
@@ -724,6 +764,8 @@ def parse_scene(data: dict, source: str = "<scene>") -> SceneSpec:
         root.fail("joint", "a scene may have a [floor] or a [joint], not both")
     if floor is not None and body.shape is None:
         root.fail("floor", "a scene with a floor needs a [body.shape] to find the contact point")
+    if floor is not None and floor.curved and not isinstance(body.shape, jaxrb.Sphere):
+        root.fail("floor", f"a {type(floor).__name__.lower()} meets only a sphere [body.shape]")
     state0, init = _initial(root)
     _joint_motion(init, joint, state0)
     (t0, t1, num_saves), options, sim = _simulation(root)

@@ -185,7 +185,8 @@ def plot_height_attitude(traj, scene, path=None, title=None):
     ax1.plot(a["t"], a["pos"][:, 2], label="mass centre z")
     if scene.body.shape is not None:
         ax1.plot(a["t"], a["lowest_z"], label="lowest point z", lw=1)
-    if scene.floor is not None and float(scene.floor.normal[2]) == 1.0:  # a level floor
+    level = scene.floor is not None and not scene.floor.curved
+    if level and float(scene.floor.normal[2]) == 1.0:  # a level floor
         ax1.axhline(float(scene.floor.height), color="k", lw=1, label="floor")
     ax1.set_ylabel("height z (m)")
     for k in range(4):

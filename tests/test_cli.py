@@ -222,7 +222,7 @@ def test_examples_listed_shown_and_run(tmp_path, capsys):
     (the heavy top, briefly; its scene.toml says what was run)."""
     assert main(["run", "--list"]) == 0
     listing = capsys.readouterr().out
-    for name in ("die", "coin", "pendulum", "heavy_top"):
+    for name in ("die", "coin", "pendulum", "heavy_top", "ball_in_bowl"):
         assert name in EXAMPLES and re.search(rf"^{name}\s+\S", listing, re.M), listing
     assert main(["run", "pendulum", "--show"]) == 0
     assert capsys.readouterr().out == PENDULUM

@@ -18,6 +18,7 @@ from .._checks import is_concrete
 from .._inputs import input_result, safe_times
 from .._quaternion import quat_normalize
 from .._results import RESULTS
+from .._shapes import Sphere
 from .._state import State
 from .._trajectory import Trajectory
 from ._events import (
@@ -70,6 +71,20 @@ def simulate_contact(
         )
     model = contact_model(scene.body.shape)  # raises for a shape with no contact model
     del model
+    resists = [scene.floor.rolling_resistance, scene.floor.spin_resistance]
+    if not isinstance(scene.body.shape, Sphere) and any(
+        not is_concrete(x) or float(x) != 0.0 for x in resists
+    ):
+        raise ValueError(
+            "rolling and spin resistance act on a ball (Sphere) only; the body is a "
+            f"{type(scene.body.shape).__name__}: leave the floor's rolling_resistance and "
+            "spin_resistance at 0"
+        )
+    if scene.floor.curved and not isinstance(scene.body.shape, Sphere):
+        raise ValueError(
+            f"a {type(scene.floor).__name__} meets only a Sphere (the body is a "
+            f"{type(scene.body.shape).__name__}); any shape meets a Floor"
+        )
     if not isinstance(options, ContactOptions):
         raise TypeError(f"options must be a ContactOptions, got {type(options).__name__}")
     ts = jnp.asarray(ts)
@@ -78,9 +93,7 @@ def simulate_contact(
     concrete = all(is_concrete(x) for x in (*jax.tree.leaves(state0), *jax.tree.leaves(scene)))
     if throw and concrete:
         d0 = float(
-            scene.body.shape.floor_distance(
-                state0.pos, quat_normalize(state0.quat), scene.floor.height, scene.floor.normal
-            )
+            scene.floor.body_distance(scene.body.shape, state0.pos, quat_normalize(state0.quat))
         )
         if d0 < -tol.contact:
             raise ValueError(
@@ -128,7 +141,7 @@ def _simulate_contact(
     t_end = ts[-1]
     T = ts.shape[0]
     y0 = unit_state(state0)
-    d0 = scene.body.shape.floor_distance(y0.pos, y0.quat, scene.floor.height, scene.floor.normal)
+    d0 = scene.floor.body_distance(scene.body.shape, y0.pos, y0.quat)
     result = RESULTS.where(
         (result == RESULTS.successful) & (d0 < -tol.contact), RESULTS.starts_below_floor, result
     )

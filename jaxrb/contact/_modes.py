@@ -175,13 +175,17 @@ def active_points(model, mode: Mode) -> jax.Array:
 
 
 class Geometry(eqx.Module):
-    """The contact kinematics of a state, world frame: the floor's normal n and tangents
-    t1, t2; the rotation R and angular velocity w; the contact points' offsets r (P, 3) from
-    the mass centre, their rates r' (P, 3), gaps g (P,), gap rates g' (P,) and slips (P, 3)."""
+    """The contact kinematics of a state, world frame: the surface's normal n and tangents
+    t1, t2 at the contact and their rates (zero on a plane); the rotation R and angular
+    velocity w; the contact points' offsets r (P, 3) from the mass centre, their rates
+    r' (P, 3), gaps g (P,), gap rates g' (P,) and slips (P, 3)."""
 
     n: jax.Array
     t1: jax.Array
     t2: jax.Array
+    n_dot: jax.Array
+    t1_dot: jax.Array
+    t2_dot: jax.Array
     R: jax.Array
     w: jax.Array
     r: jax.Array
@@ -194,34 +198,45 @@ class Geometry(eqx.Module):
         return x - (x @ self.n)[..., None] * self.n
 
 
-def floor_frame(floor, dtype):
-    """Unit normal n and tangent basis (t1, t2) of the floor (world), t1 x t2 = n."""
-    return floor.frame(dtype)
+def surface_frame(state: State, scene, model, R, w):
+    """The contact frame (n, t1, t2) and its rate (world). On a plane it is the plane's; on
+    a curved surface it is taken at the ball's centre, c = x + R offset, and differentiated
+    along the centre's velocity c' = v + w x (R offset)."""
+    surface = scene.floor
+    dtype = state.pos.dtype
+    if not surface.curved:
+        zero = jnp.zeros(3, dtype)
+        return surface.frame(dtype), (zero, zero, zero)
+    arm = R @ model.offset.astype(dtype)
+    centre, centre_vel = state.pos + arm, state.vel + cross(w, arm)
+    return jax.jvp(surface.frame_at, (centre,), (centre_vel,))
 
 
 def geometry(state: State, scene, model, seed) -> Geometry:
     """Contact kinematics at `state` (unit quaternion).
 
-    A contact point p(d) may depend on the floor's normal in the body frame, d = R^T n (a
-    support point); then its offset r = R p(d) moves at r' = w x r + R p'(d)[d x omega_body]
-    (d' = d x omega_body), which is zero beyond w x r for a corner.
+    A contact point p(d) may depend on the surface's normal in the body frame, d = R^T n (a
+    support point); then its offset r = R p(d) moves at r' = w x r + R p'(d)[d'], with
+    d' = d x omega_body + R^T n' (n' = 0 on a plane), which is zero beyond w x r for a
+    corner.
     """
-    n, t1, t2 = floor_frame(scene.floor, state.pos.dtype)
     R = quat_to_matrix(state.quat)
+    w = R @ state.omega
+    (n, t1, t2), (n_dot, t1_dot, t2_dot) = surface_frame(state, scene, model, R, w)
     down = R.T @ n
+    down_dot = cross(down, state.omega) + R.T @ n_dot
     if model.moving_points:
-        p, p_dot = jax.jvp(lambda d: model.points(d, seed), (down,), (cross(down, state.omega),))
+        p, p_dot = jax.jvp(lambda d: model.points(d, seed), (down,), (down_dot,))
     else:
         p = model.points(down, seed)
         p_dot = jnp.zeros_like(p)
-    w = R @ state.omega
     r = p @ R.T
     r_dot = cross(w, r) + p_dot @ R.T
     gap = scene.floor.gap(state.pos + r)
     vel = state.vel + cross(w, r)
     gap_rate = vel @ n
     slip = vel - gap_rate[:, None] * n
-    return Geometry(n, t1, t2, R, w, r, r_dot, gap, gap_rate, slip)
+    return Geometry(n, t1, t2, n_dot, t1_dot, t2_dot, R, w, r, r_dot, gap, gap_rate, slip)
 
 
 def unit_or(x, fallback):
@@ -316,9 +331,28 @@ def _with_face_rows(state, geom, mode, hat_f, mu, scene, model, point_rows):
     )
 
 
-def mode_rows(state, geom: Geometry, mode: Mode, hats, mu, scene, model) -> Rows:
+def resisting_couple(geom: Geometry, surface, radius, blend):
+    """The couple (N m per N of normal force, world) that resists a ball's rolling and
+    spinning on `surface`: -r (mu_r e_roll + mu_s e_spin n), with e_roll the direction of
+    the angular velocity's part along the surface and e_spin the sign of its part about the
+    normal n. Each direction is taken of the speed it makes at the ball's surface
+    (r w_t, r w . n) over max(that speed, `blend`): below the blend speed (m/s) the couple
+    falls linearly to zero, so a ball comes to rest smoothly rather than chattering."""
+    w_n = geom.w @ geom.n
+    roll = radius * (geom.w - w_n * geom.n)
+    spin = radius * w_n
+    e_roll = roll / jnp.maximum(_safe_norm(roll), blend)
+    e_spin = spin / jnp.maximum(jnp.abs(spin), blend)
+    mu_r, mu_s = surface.rolling_resistance, surface.spin_resistance
+    return -radius * (mu_r * e_roll + mu_s * e_spin * geom.n)
+
+
+def mode_rows(state, geom: Geometry, mode: Mode, hats, mu, scene, model, blend=None) -> Rows:
     """The rows of `mode` at `state`; `hats` = (slip direction at a, at b, face twist
-    direction) that sliding friction (coefficient `mu`) opposes (unit, or zero)."""
+    direction) that sliding friction (coefficient `mu`) opposes (unit, or zero). `blend`
+    (m/s): the speed below which a ball's rolling and spin resistance fade
+    (`resisting_couple`); None leaves them out of the force columns (for the projections,
+    which use only the rows)."""
     dtype = state.pos.dtype
     n, t1, t2, w = geom.n, geom.t1, geom.t2, geom.w
     kind, stick_a, stick_b = mode.kind, mode.stick[0], mode.stick[1]
@@ -356,6 +390,8 @@ def mode_rows(state, geom: Geometry, mode: Mode, hats, mu, scene, model) -> Rows
 
     if not model.num_faces:  # a shape with no face (a ball): point rows only
         k = kC = jnp.zeros((6, 3), dtype)
+        if blend is not None:  # its rolling and spin resistance ride on the normal force
+            kC = kC.at[0].set(resisting_couple(geom, scene.floor, model.radius, blend))
         d, r, r_dot, dC, mask, pos = p_d, p_r, p_rdot, p_dC, p_mask, p_pos
         holonomic = mask & jnp.array([True, True, False, False, False, False])
         twist, rho = jnp.zeros(3, dtype), jnp.ones((), dtype)
@@ -366,10 +402,15 @@ def mode_rows(state, geom: Geometry, mode: Mode, hats, mu, scene, model) -> Rows
     J = jnp.concatenate([d, cross(r, d) + k], axis=1)
     C = jnp.concatenate([dC, cross(r, dC) + kC], axis=1)
     point_vel = state.vel + cross(w, r)
+    bias = jnp.sum(d * cross(w, r_dot), axis=1)
+    if scene.floor.curved:  # a ball's point rows: their directions turn with the frame
+        g = geom
+        d_dot = jnp.stack([g.n_dot, g.n_dot, g.t1_dot, g.t2_dot, g.t1_dot, g.t2_dot])
+        bias = bias + jnp.sum(d_dot * point_vel, axis=1)
     return Rows(
         J=J,
         C=C,
-        bias=jnp.sum(d * cross(w, r_dot), axis=1),
+        bias=bias,
         vel=jnp.sum(d * point_vel, axis=1) + k @ w,
         pos=pos,
         mask=mask,
@@ -451,7 +492,9 @@ def solve_mode(t, state: State, mode: Mode, scene, model, tol, hats=None, geom=N
     if hats is None:
         twist, _ = face_twist(state, geom, model, mode.face)
         hats = sliding_hats(geom, twist, mode, tol.slip_blend)
-    rows = mode_rows(state, geom, mode, hats, scene.floor.friction, scene, model)
+    rows = mode_rows(
+        state, geom, mode, hats, scene.floor.friction, scene, model, blend=tol.slip_blend
+    )
     acc0, omega_dot0 = accelerations(t, state, scene)
     u0_dot = jnp.concatenate([acc0, geom.R @ omega_dot0])
     beta = jnp.asarray(beta, dtype)

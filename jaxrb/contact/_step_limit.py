@@ -41,7 +41,10 @@ def gap_step_limit(t, y, mode, offsets, scene, model, tol) -> jax.Array:
     free = ~active_points(model, mode) & (offsets[:P] == 0) & (geom.gap > 0)
     gap = jnp.where(free, geom.gap, 1.0)
     speed = jnp.maximum(-geom.gap_rate, 0.0)
-    acc = 2.0 * jnp.linalg.norm(sol.point_accelerations(), axis=-1) + jnp.finfo(dtype).tiny
+    # a curved surface's gap also changes as the point moves along it: n' . v_p
+    curving = jnp.abs(geom.slip @ geom.n_dot)
+    acc = 2.0 * (jnp.linalg.norm(sol.point_accelerations(), axis=-1) + curving)
+    acc = acc + jnp.finfo(dtype).tiny
     room = SHRINK * gap
     # v h + A h^2 / 2 = room, in the form that does not cancel
     h = 2.0 * room / (speed + jnp.sqrt(speed**2 + 2.0 * acc * room))

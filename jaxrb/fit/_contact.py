@@ -50,7 +50,8 @@ class _ContactResiduals(eqx.Module):
 
     def __call__(self, z, args):
         e, mu = self.physical(z)
-        floor = Floor(e, mu, self.scene.floor.height, self.scene.floor.normal)
+        old = self.scene.floor
+        floor = Floor(e, mu, old.height, old.normal, old.rolling_resistance, old.spin_resistance)
         scene = Scene(self.scene.body, self.scene.forces, floor=floor)
         traj = simulate(
             scene,
@@ -109,8 +110,8 @@ def fit_contact(
     not fitted, with std 0). Friction is identifiable only if the contact slides at some
     impact; otherwise the result carries an identifiability warning.
     """
-    if scene.floor is None or scene.body.shape is None:
-        raise ValueError("fit_contact needs a scene with a Floor and a body shape")
+    if scene.floor is None or scene.floor.curved or scene.body.shape is None:
+        raise ValueError("fit_contact needs a scene with a Floor (a plane) and a body shape")
     if not isinstance(state0, State):
         raise TypeError(f"state0 must be a jaxrb.State, got {type(state0).__name__}")
     ts = check_times(ts)

@@ -1,0 +1,179 @@
+"""Curved surfaces a ball rolls, slides and bounces on: the inside of a spherical bowl and
+of an upright cone (a funnel, as a roulette wheel's inclined track).
+
+A surface gives, for a point x (world, m), its signed distance above the surface `gap(x)`
+(negative below it) and, for a ball centred at x, the frame of its contact: the unit normal
+n = grad gap (pointing out of the surface into the space the ball moves in) and a tangent
+basis t1, t2 with t1 x t2 = n (`frame_at`). The contact engine evaluates the frame at the
+ball's centre and differentiates it along the centre's velocity, so only a `Sphere` meets a
+curved surface; any shape meets a plane (`Floor`).
+"""
+
+import equinox as eqx
+import jax.numpy as jnp
+
+from ._checks import Requirement, finite, finite_positive, raise_unmet
+from ._floor import contact_requirements, set_contact_coefficients
+from ._quaternion import _safe_norm, quat_rotate
+from ._shapes import Sphere
+
+
+def _tangents(n):
+    """t1: the world x axis projected onto the plane normal to n (the y axis where n is
+    nearly along x), t2 = n x t1."""
+    eye = jnp.eye(3, dtype=n.dtype)
+    seed = jnp.where(jnp.abs(n[0]) < 0.9, eye[0], eye[1])
+    t1 = seed - (seed @ n) * n
+    t1 = t1 / _safe_norm(t1)
+    return t1, jnp.cross(n, t1)
+
+
+class AbstractCurvedSurface(eqx.Module):
+    """A static curved surface with Newton's restitution, Coulomb friction and rolling and
+    spin resistance (the same meaning as a `Floor`'s), met by a `Sphere` only."""
+
+    restitution: eqx.AbstractVar[jnp.ndarray]
+    friction: eqx.AbstractVar[jnp.ndarray]
+    rolling_resistance: eqx.AbstractVar[jnp.ndarray]
+    spin_resistance: eqx.AbstractVar[jnp.ndarray]
+
+    curved = True  # the contact frame depends on where the ball is
+
+    def __check_init__(self):
+        raise_unmet(type(self).__name__, self.requirements())
+
+    def requirements(self) -> tuple[Requirement, ...]:
+        """Conditions on the surface's parameters: a ValueError naming the field for
+        concrete values where it is made, a result flag in `simulate` for traced ones."""
+        return contact_requirements(self)
+
+    def gap(self, points):
+        """Signed distance (m) of world `points` (..., 3) above the surface."""
+        raise NotImplementedError
+
+    def frame_at(self, centre):
+        """The unit normal n and tangents t1, t2 (world) of the contact of a ball centred
+        at `centre` (3,): n points from the surface towards the centre."""
+        raise NotImplementedError
+
+    def body_distance(self, shape, pos, quat):
+        """Signed distance (m) of a ball's surface above this one; `pos` the mass centre
+        (world), `quat` the unit attitude quaternion."""
+        if not isinstance(shape, Sphere):
+            raise ValueError(
+                f"a {type(self).__name__} meets only a Sphere (got a {type(shape).__name__}); "
+                "any shape meets a Floor"
+            )
+        centre = pos + quat_rotate(quat, shape.offset.astype(pos.dtype))
+        return self.gap(centre) - shape.radius
+
+
+class Bowl(AbstractCurvedSurface):
+    """The inside of a sphere of radius `radius` (m) whose lowest point is (0, 0, `height`):
+    its centre is at (0, 0, height + radius), and a ball moves inside it.
+
+    A ball of radius r rolling without slipping near the bottom oscillates like a pendulum
+    of length 7 (radius - r) / 5.
+    """
+
+    restitution: jnp.ndarray
+    friction: jnp.ndarray
+    rolling_resistance: jnp.ndarray
+    spin_resistance: jnp.ndarray
+    radius: jnp.ndarray
+    height: jnp.ndarray
+
+    def __init__(
+        self,
+        restitution,
+        friction=0.0,
+        radius=1.0,
+        height=0.0,
+        rolling_resistance=0.0,
+        spin_resistance=0.0,
+    ):
+        set_contact_coefficients(self, restitution, friction, rolling_resistance, spin_resistance)
+        self.radius = jnp.asarray(radius, dtype=float)
+        self.height = jnp.asarray(height, dtype=float)
+
+    def requirements(self):
+        return (
+            *super().requirements(),
+            Requirement("radius", self.radius, "finite and > 0", finite_positive(self.radius)),
+            Requirement("height", self.height, "finite", finite(self.height)),
+        )
+
+    def centre(self, dtype=float):
+        return jnp.stack([0.0, 0.0, self.height + self.radius]).astype(dtype)
+
+    def gap(self, points):
+        return self.radius.astype(points.dtype) - _safe_norm(
+            points - self.centre(points.dtype), axis=-1
+        )
+
+    def frame_at(self, centre):
+        n = self.centre(centre.dtype) - centre
+        n = n / _safe_norm(n)
+        return (n, *_tangents(n))
+
+
+class Cone(AbstractCurvedSurface):
+    """The inside of an upright cone with the world z axis as its axis, its apex at
+    (0, 0, `height`) and its surface rising outwards at `inclination` (rad, in (0, pi/2))
+    from the horizontal: z = height + tan(inclination) rho, rho the distance from the axis.
+    A roulette wheel's inclined ball track is such a cone.
+
+    The frame of a contact at azimuth phi: n = -sin(d) e_rho + cos(d) e_z (d the
+    inclination), t1 = cos(d) e_rho + sin(d) e_z (up the slope), t2 = e_phi. A ball rolling
+    without slipping and without spin about n on a horizontal circle of centre radius rho
+    goes round at Omega^2 = 5 g tan(d) / (7 rho) (docs/contact.md, section 8).
+    """
+
+    restitution: jnp.ndarray
+    friction: jnp.ndarray
+    rolling_resistance: jnp.ndarray
+    spin_resistance: jnp.ndarray
+    inclination: jnp.ndarray
+    height: jnp.ndarray
+
+    def __init__(
+        self,
+        restitution,
+        friction=0.0,
+        inclination=0.3,
+        height=0.0,
+        rolling_resistance=0.0,
+        spin_resistance=0.0,
+    ):
+        set_contact_coefficients(self, restitution, friction, rolling_resistance, spin_resistance)
+        self.inclination = jnp.asarray(inclination, dtype=float)
+        self.height = jnp.asarray(height, dtype=float)
+
+    def requirements(self):
+        d = self.inclination
+        return (
+            *super().requirements(),
+            Requirement("inclination", d, "in (0, pi/2) rad", (d > 0) & (d < jnp.pi / 2)),
+            Requirement("height", self.height, "finite", finite(self.height)),
+        )
+
+    def _radial(self, x):
+        """The horizontal unit vector e_rho from the axis towards x (e_x on the axis)."""
+        horizontal = x * jnp.array([1.0, 1.0, 0.0], x.dtype)
+        rho = _safe_norm(horizontal, axis=-1, keepdims=True)
+        on_axis = rho <= jnp.finfo(x.dtype).eps
+        e_x = jnp.array([1.0, 0.0, 0.0], x.dtype)
+        return jnp.where(on_axis, e_x, horizontal / jnp.where(on_axis, 1.0, rho)), rho[..., 0]
+
+    def gap(self, points):
+        d = self.inclination.astype(points.dtype)
+        _, rho = self._radial(points)
+        return (points[..., 2] - self.height.astype(points.dtype)) * jnp.cos(d) - rho * jnp.sin(d)
+
+    def frame_at(self, centre):
+        d = self.inclination.astype(centre.dtype)
+        e_rho, _ = self._radial(centre)
+        e_z = jnp.array([0.0, 0.0, 1.0], centre.dtype)
+        n = -jnp.sin(d) * e_rho + jnp.cos(d) * e_z
+        t1 = jnp.cos(d) * e_rho + jnp.sin(d) * e_z
+        return n, t1, jnp.cross(n, t1)
