@@ -7,6 +7,8 @@ import numpy as np
 from matplotlib import animation
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
+from ._surfaces import Bowl
+
 
 def _box_faces(half):
     hx, hy, hz = half
@@ -82,6 +84,22 @@ def _rotations(quat) -> np.ndarray:
     )
 
 
+def surface_mesh(surface, limits, num=25):
+    """Grids (X, Y, Z) (m, world) of a curved surface (a `Bowl` or `Cone`) over the view's
+    horizontal extent `limits` (3, 2), for a wireframe."""
+    reach = float(np.max(np.abs(limits[:2])))
+    phi = np.linspace(0.0, 2 * np.pi, 2 * num)
+    if isinstance(surface, Bowl):
+        R, h = float(surface.radius), float(surface.height)
+        top = min(np.arcsin(min(reach / R, 1.0)), 0.5 * np.pi)
+        theta = np.linspace(0.0, top, num)[:, None]
+        rho, z = R * np.sin(theta), h + R - R * np.cos(theta)
+    else:
+        rho = np.linspace(0.0, reach, num)[:, None]
+        z = float(surface.height) + np.tan(float(surface.inclination)) * rho
+    return rho * np.cos(phi), rho * np.sin(phi), z + 0.0 * phi
+
+
 def world_limits(points, floor_z=None, margin=0.08, min_fraction=0.25):
     """Fixed axis limits (3, 2) in m that hold `points` (N, 3, world) and the floor plane.
 
@@ -147,6 +165,8 @@ def animate(traj, scene, path=None, *, fps=20, max_frames=60, view="world", trai
     floor = Poly3DCollection([], facecolor="0.75", alpha=0.4, edgecolor="0.5", zorder=0)
     if floor_z is not None:
         ax.add_collection3d(floor)
+    elif scene.floor is not None:  # a bowl or cone: a wireframe of it under the view
+        ax.plot_wireframe(*surface_mesh(scene.floor, limits), color="0.55", lw=0.4, zorder=0)
     for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
         axis.set_major_locator(plt.MaxNLocator(4))
     time_text = ax.text2D(0.02, 0.95, "", transform=ax.transAxes)

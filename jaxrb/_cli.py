@@ -78,11 +78,18 @@ _EPILOG_SWEEP = f"""\
 grid parameters (-p/--param, repeatable; the grid is their Cartesian product):
   PATH=START:STOP:NUM   NUM evenly spaced values (inclusive), e.g. floor.restitution=0.2:0.8:4
   PATH=V1,V2,...        explicit values, e.g. body.mass=0.004,0.005
+random parameters (-r/--random, repeatable; --draws N runs per grid point, --seed S):
+  PATH=LOW:HIGH         uniform in [LOW, HIGH], e.g. initial.omega.0=-40:40
+  --random-attitude     the initial attitude uniform over all rotations (columns quat0-3)
 PATH is a dotted path into the scene file: body.mass, floor.friction, initial.omega.2,
 forces.1.coefficient (the second [[forces]] table), simulation.t_end, ...
+The same draws (from the seed) are used at every grid point.
 
-output: OUTPUT/sweep.csv, one row per grid point: the parameters, the solver result,
-final position and speed, |omega|, energies, max height, impacts, solver steps. Every grid
+output: OUTPUT/sweep.csv, one row per run: the parameters, the solver result,
+final position and speed, |omega|, energies, max height, impacts, solver steps, and how the
+body ends up: the body axis nearest the world's up (up_axis: a coin on a face shows +z or
+-z), its tilt from the vertical (tilt_deg) and, for a die (type = "die"), the number on top
+(face_up). Every grid
 point is checked before the first run; a run whose solver fails or whose motion overflows
 is a row with a failed result. At most {MAX_SWEEP_RUNS} grid points.
 
@@ -199,6 +206,8 @@ def _simulate(spec, progress=False, throw=True):
         max_steps=spec.options["max_steps"],
         throw=throw,
     )
+    if spec.scene.floor is not None:
+        kwargs["max_impacts"] = spec.options["max_impacts"]
     if progress and spec.scene.floor is None:
         kwargs["progress_meter"] = dfx.TqdmProgressMeter()
     return jaxrb.simulate(spec.scene, spec.state0, spec.ts, **kwargs)
@@ -514,6 +523,36 @@ def _parse_param(text: str):
     return name, values
 
 
+def _parse_random(text: str):
+    """PATH and (LOW, HIGH) from `-r PATH=LOW:HIGH`."""
+    where = f"--random {text!r}"
+    if "=" not in text:
+        raise CLIError(f"{where}: expected PATH=LOW:HIGH")
+    name, spec = (x.strip() for x in text.split("=", 1))
+    if not name:
+        raise CLIError(f"{where}: empty PATH")
+    parts = spec.split(":")
+    if len(parts) != 2:
+        raise CLIError(f"{where}: expected LOW:HIGH (two parts), got {spec!r}")
+    low, high = (_grid_number(where, p) for p in parts)
+    if not low <= high:
+        raise CLIError(f"{where}: LOW must be <= HIGH")
+    return name, (low, high)
+
+
+def _draws(ranges, n: int, attitude: bool, seed: int) -> list[tuple]:
+    """`n` random draws (the same for every grid point): per draw, one value per range,
+    uniform in [LOW, HIGH], then with `attitude` a unit quaternion uniform on the sphere
+    of rotations (a normalised 4-vector of standard normals)."""
+    rng = np.random.default_rng(seed)
+    values = [rng.uniform(low, high, n) for _, (low, high) in ranges]
+    if attitude:
+        q = rng.standard_normal((n, 4))
+        q /= np.linalg.norm(q, axis=1, keepdims=True)
+        values += [q[:, k] for k in range(4)]
+    return [tuple(float(v[i]) for v in values) for i in range(n)]
+
+
 def _set_path(data: dict, dotted: str, value):
     """Set `value` at a dotted path (e.g. "forces.1.coefficient") in a deep-copied TOML dict."""
     keys = dotted.split(".")
@@ -555,23 +594,45 @@ def cmd_sweep(args) -> int:
     from ._scene_file import parse_scene
 
     base, path = _load(args.scene)
-    if not args.param:
-        raise CLIError("sweep needs at least one -p/--param PATH=SPEC (see jaxrb sweep --help)")
+    randomised = bool(args.random) or args.random_attitude
+    if not args.param and not randomised:
+        raise CLIError(
+            "sweep needs at least one -p/--param PATH=SPEC or -r/--random PATH=LOW:HIGH "
+            "(see jaxrb sweep --help)"
+        )
+    if args.draws is not None and not randomised:
+        raise CLIError("--draws needs a random parameter (-r PATH=LOW:HIGH or --random-attitude)")
+    draws = 1 if args.draws is None else args.draws
+    if draws < 1:
+        raise CLIError(f"--draws must be >= 1, got {draws}")
     params = [_parse_param(p) for p in args.param]
-    names = [n for n, _ in params]
+    ranges = [_parse_random(r) for r in args.random]
+    names = [n for n, _ in params] + [n for n, _ in ranges]
     if len(set(names)) != len(names):
-        raise CLIError("each --param PATH may be given once")
-    runs = math.prod(len(v) for _, v in params)
+        raise CLIError("each PATH may be given once (in --param or --random)")
+    runs = math.prod(len(v) for _, v in params) * draws
     if runs > MAX_SWEEP_RUNS:
-        raise CLIError(f"the grid has {runs} points: a sweep has at most {MAX_SWEEP_RUNS} runs")
-    grid = list(itertools.product(*[v for _, v in params]))
-    # validate every grid point first: a bad value fails before any simulation runs
+        raise CLIError(f"the sweep has {runs} runs: a sweep has at most {MAX_SWEEP_RUNS}")
+    grid = [
+        point + draw
+        for point in itertools.product(*[v for _, v in params])
+        for draw in _draws(ranges, draws, args.random_attitude, args.seed)
+    ]
+    if args.random_attitude:
+        names = names + ["quat0", "quat1", "quat2", "quat3"]
+    # validate every run first: a bad value fails before any simulation runs
     specs = []
     for point in grid:
         data = copy.deepcopy(base.data)
-        for name, value in zip(names, point, strict=True):
-            _set_path(data, name, value)
-        where = ", ".join(f"{n}={v:g}" for n, v in zip(names, point, strict=True))
+        values = dict(zip(names, point, strict=True))
+        for name in names[: len(params) + len(ranges)]:
+            _set_path(data, name, values[name])
+        if args.random_attitude:
+            initial = data.setdefault("initial", {})
+            for key in ("quat", "axis", "angle_deg", "euler_deg", "sequence"):
+                initial.pop(key, None)
+            initial["quat"] = [values[f"quat{k}"] for k in range(4)]
+        where = ", ".join(f"{n}={v:g}" for n, v in values.items())
         specs.append(parse_scene(data, source=f"{path} with {where}"))
     outdir = Path(args.output)
     with StagedOutput(args.output, ["sweep.csv"], args.force) as out:
@@ -602,12 +663,35 @@ def cmd_sweep(args) -> int:
     return 0
 
 
+def _final_attitude_metrics(spec, traj) -> dict:
+    """How the body ends up: `up_axis`, the body axis (+x ... -z) nearest the world's up;
+    `tilt_deg`, the angle between them; `face_up`, the number a die (`type = "die"`) shows
+    (empty for other shapes)."""
+    import jaxrb
+
+    quat = np.asarray(traj.states.quat, dtype=float)[-1]
+    up = np.asarray(jaxrb.quat_to_matrix(jaxrb.quat_normalize(quat)))[2]  # world up, body frame
+    k = int(np.argmax(np.abs(up)))
+    face = ""
+    shape = spec.data.get("body", {}).get("shape", {})
+    if isinstance(shape, dict) and shape.get("type") == "die":
+        build = jaxrb.dice.BUILDERS[shape["sides"]]
+        die = build(shape["edge"]) if "edge" in shape else build()
+        face = int(die.outcome(quat))
+    return {
+        "up_axis": ("+" if up[k] > 0 else "-") + "xyz"[k],
+        "tilt_deg": float(np.degrees(np.arccos(min(abs(up[k]), 1.0)))),
+        "face_up": face,
+    }
+
+
 def _sweep_metrics(spec) -> dict:
-    """`_metrics` of one grid point's run; a motion that overflowed is a failed result."""
+    """`_metrics` of one grid point's run, and how the body ends up
+    (`_final_attitude_metrics`); a motion that overflowed is a failed result."""
     import jaxrb
 
     traj = _simulate_checked(spec)
-    metrics = _metrics(traj, spec.scene)
+    metrics = _metrics(traj, spec.scene) | _final_attitude_metrics(spec, traj)
     if metrics["result"] == "successful":
         s = traj.states
         energy = jaxrb.energy(spec.scene, s)
@@ -752,6 +836,28 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="PATH=SPEC",
         help="a grid parameter (repeatable), e.g. floor.restitution=0.2:0.8:4",
     )
+    sweep.add_argument(
+        "-r",
+        "--random",
+        action="append",
+        default=[],
+        metavar="PATH=LOW:HIGH",
+        help="a parameter drawn uniformly from [LOW, HIGH] for each run (repeatable), "
+        "e.g. initial.omega.0=-40:40",
+    )
+    sweep.add_argument(
+        "--random-attitude",
+        action="store_true",
+        help="draw each run's initial attitude uniformly at random (replaces the scene's)",
+    )
+    sweep.add_argument(
+        "--draws",
+        type=int,
+        default=None,
+        metavar="N",
+        help="random runs per grid point (default 1; needs -r or --random-attitude)",
+    )
+    sweep.add_argument("--seed", type=int, default=0, help="seed of the random draws (default 0)")
     sweep.add_argument(
         "--show", type=int, default=20, metavar="N", help="rows to print (default 20)"
     )

@@ -27,7 +27,10 @@ class RESULTS(dfx.RESULTS):  # pyright: ignore
     invalid_joint = "the joint's point must be finite and its axis a finite non-zero direction."
     invalid_floor_height = "the floor's height must be finite."
     invalid_floor_normal = "the floor's normal must be a finite non-zero direction."
-    invalid_resistance = "the floor's rolling and spin resistance must be finite and >= 0."
+    invalid_resistance = (
+        "the floor's rolling and spin resistance must be finite and >= 0, and non-zero only "
+        "for a ball (Sphere)."
+    )
     invalid_surface = (
         "the curved surface's dimensions are invalid: a bowl's radius must be finite and "
         "> 0, a cone's inclination in (0, pi/2) rad."

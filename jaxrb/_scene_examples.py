@@ -17,6 +17,7 @@ EXAMPLES = {
     "pendulum": "pendulum.toml",
     "heavy_top": "heavy_top.toml",
     "ball_in_bowl": "ball_in_bowl.toml",
+    "thick_coin": "thick_coin.toml",
 }
 
 

@@ -32,7 +32,8 @@ The format is documented, field by field, in the annotated example shipped with 
   joint gives the mass centre, and a hinge's `omega` must lie along its axis; anything else
   is an error naming the field.
 - `[simulation]`: `t_end` (s, required), `t_start`, `num_saves`, `rtol`, `atol`,
-  `max_steps`, `solver` ("tsit5", "dopri5", "dopri8").
+  `max_steps`, `solver` ("tsit5", "dopri5", "dopri8"), and for a scene with a floor
+  `max_impacts` (default 64; the run may have 4 max_impacts + 16 contact events).
 
 Beyond each field's own checks, a scene is refused when its initial energy overflows, when
 the body starts below the floor, and when its saves would make more than `MAX_OUTPUT_BYTES`
@@ -75,6 +76,7 @@ MAX_OUTPUT_BYTES = 1e9
 the CSV copy is about twice as large, and both are held in memory while written)."""
 
 MAX_STEPS_LIMIT = 10**12
+MAX_IMPACTS_LIMIT = 100_000  # the impact record's static size
 """The largest `[simulation].max_steps` accepted."""
 
 
@@ -705,8 +707,11 @@ def _joint(root: _Table):
 
 
 def _simulation(root: _Table):
+    from .contact._options import DEFAULT_MAX_IMPACTS
+
     sim = root.table(
-        "simulation", ("t_start", "t_end", "num_saves", "rtol", "atol", "max_steps", "solver")
+        "simulation",
+        ("t_start", "t_end", "num_saves", "rtol", "atol", "max_steps", "max_impacts", "solver"),
     )
     t0 = sim.number("t_start", 0.0)
     t1 = sim.number("t_end")
@@ -720,6 +725,9 @@ def _simulation(root: _Table):
         "atol": sim.number("atol", 1e-6, positive=True),
         "max_steps": sim.integer("max_steps", 100_000, minimum=1, maximum=MAX_STEPS_LIMIT),
         "solver": sim.string("solver", "tsit5", choices=_SOLVERS),
+        "max_impacts": sim.integer(
+            "max_impacts", DEFAULT_MAX_IMPACTS, minimum=1, maximum=MAX_IMPACTS_LIMIT
+        ),
     }
     return (t0, t1, n), options, sim
 

@@ -278,6 +278,78 @@ def test_sweep(scene_file, tmp_path, capsys):
     assert "output already exists" in capsys.readouterr().err
 
 
+def test_sweep_draws_random_parameters_reproducibly(scene_file, tmp_path, capsys):
+    """-r draws uniformly per run (the same draws at every grid point, from --seed);
+    --random-attitude draws a unit quaternion; each row matches its own closed form."""
+
+    def sweep(out, *extra):
+        args = [
+            "sweep",
+            str(scene_file),
+            "-o",
+            str(tmp_path / out),
+            "-p",
+            "forces.1.coefficient=0.2,0.6",
+        ]
+        assert main([*args, "-r", "initial.vel.2=1:3", "--draws", "3", *extra]) == 0
+        with open(tmp_path / out / "sweep.csv") as f:
+            return list(csv.DictReader(f))
+
+    rows = sweep("a", "--seed", "5", "--random-attitude")
+    assert "6 runs" in capsys.readouterr().out and len(rows) == 6
+    v0 = [float(r["initial.vel.2"]) for r in rows]
+    assert all(1 <= v <= 3 for v in v0) and v0[:3] == v0[3:] and len(set(v0[:3])) == 3
+    for r in rows:
+        c, v = float(r["forces.1.coefficient"]), float(r["initial.vel.2"])
+        np.testing.assert_allclose(float(r["final_z"]), exact_z(0.4, c / 2.0, v0=v), atol=1e-8)
+        quat = [float(r[f"quat{k}"]) for k in range(4)]
+        np.testing.assert_allclose(np.linalg.norm(quat), 1.0, rtol=1e-9)
+        assert r["up_axis"] in {"+x", "-x", "+y", "-y", "+z", "-z"} and r["face_up"] == ""
+    assert [r["initial.vel.2"] for r in sweep("b", "--seed", "5")] == [
+        r["initial.vel.2"] for r in rows
+    ]
+    assert [r["initial.vel.2"] for r in sweep("c", "--seed", "6")] != [
+        r["initial.vel.2"] for r in rows
+    ]
+
+
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["-r", "initial.vel.2=3:1"], "LOW must be <= HIGH"),
+        (["-r", "initial.vel.2=1"], "LOW:HIGH"),
+        (["-p", "body.mass=1,2", "--draws", "4"], "--draws needs a random parameter"),
+        (["-r", "initial.vel.2=1:2", "--draws", "0"], "--draws must be >= 1"),
+    ],
+)
+def test_sweep_refuses_bad_random_parameters(scene_file, tmp_path, capsys, extra, message):
+    assert main(["sweep", str(scene_file), "-o", str(tmp_path), *extra]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_sweep_reads_the_number_a_die_shows():
+    """`face_up` of a `type = "die"` scene: the number on the face whose normal is up."""
+    import types
+
+    from jaxrb._cli import _final_attitude_metrics
+    from jaxrb._scene_file import loads_scene
+
+    spec = loads_scene(
+        '[body]\nmass = 0.005\n[body.shape]\ntype = "die"\nsides = 20\n'
+        "[initial]\npos = [0, 0, 0.1]\n[floor]\nrestitution = 0.5\n[simulation]\nt_end = 1.0\n"
+    )
+    die = jaxrb.dice.d20()
+    normals = np.asarray(die.shape.face_normals())
+    for face in (0, 7, 19):
+        # the attitude that turns this face's normal to the world's up
+        axis = np.cross(normals[face], [0.0, 0.0, 1.0])
+        angle = np.arccos(np.clip(normals[face][2], -1, 1))
+        quat = np.asarray(jaxrb.axis_angle_to_quat(axis, angle))
+        traj = types.SimpleNamespace(states=types.SimpleNamespace(quat=quat[None]))
+        metrics = _final_attitude_metrics(spec, traj)
+        assert metrics["face_up"] == die.numbers[face]
+
+
 @pytest.mark.parametrize(
     "param, message",
     [

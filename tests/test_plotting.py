@@ -224,3 +224,26 @@ def test_animation_camera_is_fixed_with_the_floor_in_view(traj_scene, tmp_path):
     assert x0 < pos[:, 0].min() and pos[:, 0].max() < x1 and y0 < 0 < y1
     assert z0 < float(scene.floor.height) < pos[:, 2].min() <= pos[:, 2].max() < z1
     plotting.plt.close("all")
+
+
+@pytest.mark.parametrize(
+    "surface", [jaxrb.Bowl(0.5, radius=0.5), jaxrb.Cone(0.5, inclination=0.3)], ids=["bowl", "cone"]
+)
+def test_animation_draws_a_curved_surface_under_the_ball(surface, tmp_path):
+    """A ball on a bowl or cone: the surface is drawn as a wireframe lying on it (every mesh
+    point has gap 0), and the run plots draw without a plane."""
+    from jaxrb._animation import surface_mesh
+
+    ball = jaxrb.RigidBody(0.05, shape=jaxrb.Sphere(0.02))
+    scene = jaxrb.Scene(ball, (jaxrb.Gravity(),), floor=surface)
+    ts = jnp.linspace(0.0, 1.0, 5)
+    circle = jnp.stack([0.2 * jnp.cos(ts), 0.2 * jnp.sin(ts), 0.1 + 0 * ts], -1)
+    zeros = jnp.zeros((5, 3))
+    states = jaxrb.State(circle, jnp.tile(jnp.array([1.0, 0, 0, 0]), (5, 1)), zeros, zeros)
+    traj = _trajectory(ts, states)
+    plotting.animate(traj, scene, tmp_path / "a.gif", max_frames=3)
+    assert (tmp_path / "a.gif").stat().st_size > 0
+    X, Y, Z = surface_mesh(surface, np.array([[-0.3, 0.3], [-0.3, 0.3], [0.0, 0.3]]))
+    mesh = jnp.asarray(np.stack([X, Y, Z], -1))
+    np.testing.assert_allclose(np.asarray(surface.gap(mesh)), 0.0, atol=1e-12)
+    assert len(plotting.save_run_plots(traj, scene, tmp_path)) == 3

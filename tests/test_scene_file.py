@@ -42,7 +42,13 @@ def test_default_scene_parses():
     assert spec.ts[0] == 0.0 and spec.ts[-1] == 0.6 and spec.ts.size == 241
     np.testing.assert_allclose(np.linalg.norm(spec.state0.quat), 1.0, rtol=1e-12)
     np.testing.assert_allclose(spec.state0.omega, [18.0, -11.0, 7.0])
-    assert spec.options == {"rtol": 1e-6, "atol": 1e-6, "max_steps": 100000, "solver": "tsit5"}
+    assert spec.options == {
+        "rtol": 1e-6,
+        "atol": 1e-6,
+        "max_steps": 100000,
+        "solver": "tsit5",
+        "max_impacts": 64,
+    }
 
 
 def test_minimal_defaults():

@@ -73,7 +73,7 @@ def simulate_contact(
     del model
     resists = [scene.floor.rolling_resistance, scene.floor.spin_resistance]
     if not isinstance(scene.body.shape, Sphere) and any(
-        not is_concrete(x) or float(x) != 0.0 for x in resists
+        is_concrete(x) and float(x) != 0.0 for x in resists
     ):
         raise ValueError(
             "rolling and spin resistance act on a ball (Sphere) only; the body is a "
@@ -137,6 +137,11 @@ def _simulate_contact(
     dtype = ts.dtype
     model = contact_model(scene.body.shape)
     result = input_result(scene, state0, ts, settings_ok)
+    if not isinstance(scene.body.shape, Sphere):  # traced resistances: checked here
+        resists = (scene.floor.rolling_resistance != 0) | (scene.floor.spin_resistance != 0)
+        result = RESULTS.where(
+            (result == RESULTS.successful) & resists, RESULTS.invalid_resistance, result
+        )
     user_ts, ts = ts, safe_times(ts, result == RESULTS.successful)
     t_end = ts[-1]
     T = ts.shape[0]

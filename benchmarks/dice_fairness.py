@@ -1,0 +1,134 @@
+# ruff: noqa: E501  (table strings)
+"""Are the regular dice fair? d4, d6, d8, d12 and d20 thrown at random (the contact engine,
+float64).
+
+Each die of `jaxrb.dice` (uniform density, its default edge) is thrown `--n` times with the
+random throws of `contact_throws.py` (height U(0.05, 0.3) m, uniformly random attitude,
+spin U(-40, 40) rad/s about each axis, sideways speed U(-0.5, 0.5) m/s; restitution and
+friction U(0.2, 0.8)) and read at T = 4 s (`Die.outcome`: the face up, the face down for a
+d4). Over the throws that end at rest squarely on a face: each number's frequency with its
+95 % Wilson interval, and Pearson's chi-square test of equal frequencies (its p-value; a fair
+die gives p below 0.05 one time in twenty).
+
+One throw per compiled call through `jaxrb.sweep` (`rtol = atol = 1e-8`, `max_impacts`
+200). A loaded d6 (its mass centre moved off centre) is `dice_outcomes.py`.
+
+Writes `dice_fairness_all.md`, `dice_fairness_all.png` and `dice_fairness_all.npz` to
+`--out`; existing files are kept unless `--force`.
+
+Run: python -m benchmarks.dice_fairness --n 1000 --out bench_out
+"""
+
+import argparse
+import os
+import time
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp  # noqa: E402
+import matplotlib  # noqa: E402
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from scipy.stats import chisquare  # noqa: E402
+
+import jaxrb  # noqa: E402
+
+try:
+    from . import _common as C
+    from .contact_throws import throws
+    from .dice_outcomes import make_throw, settled, wilson
+except ImportError:
+    import _common as C  # type: ignore
+    from contact_throws import throws  # type: ignore
+    from dice_outcomes import make_throw, settled, wilson  # type: ignore
+
+DICE = ("d4", "d6", "d8", "d12", "d20")
+
+
+def throw_die(name, n, seed=3):
+    """`n` random throws of the fair die `name`: the sweep's outputs (numpy)."""
+    die = getattr(jaxrb.dice, name)()
+    state, restitution, friction = throws(n, seed)
+    rows = dict(state=state, restitution=restitution, friction=friction, offset=jnp.zeros((n, 3)))
+    out = jaxrb.sweep(make_throw(die), rows, chunk_size=1, progress=True)
+    return die, {k: np.asarray(v) for k, v in out.items()}
+
+
+def frequencies(die, out):
+    """Per number 1..F: count, frequency, Wilson interval; the throws used; the chi-square
+    p-value of equal frequencies."""
+    ok = settled(out)
+    counts = np.bincount(out["outcome"][ok], minlength=die.sides + 1)[1:]
+    used = int(ok.sum())
+    lo, hi = wilson(counts, used)
+    return counts, counts / max(used, 1), lo, hi, used, float(chisquare(counts).pvalue)
+
+
+def plot(results, path):
+    fig, axes = plt.subplots(1, len(results), figsize=(3.4 * len(results), 3.6), squeeze=False)
+    for ax, (name, (counts, freq, lo, hi, used, p)) in zip(axes[0], results.items(), strict=True):
+        faces = np.arange(1, len(counts) + 1)
+        ax.errorbar(
+            faces,
+            freq,
+            yerr=[np.maximum(freq - lo, 0), np.maximum(hi - freq, 0)],
+            fmt="o",
+            ms=3,
+            capsize=2,
+        )
+        ax.axhline(1 / len(counts), color="k", lw=0.8, ls="--")
+        ax.set_title(f"{name}: {used} throws, chi² p = {p:.2f}", fontsize=9)
+        ax.set_xlabel("number")
+        ax.set_xticks(faces if len(faces) <= 8 else faces[:: 2 if len(faces) <= 12 else 4])
+    axes[0, 0].set_ylabel("frequency (95 % interval); dashed: fair")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--n", type=int, default=1000, help="random throws per die")
+    p.add_argument("--dice", default=",".join(DICE), help="which dice, e.g. d4,d20")
+    p.add_argument("--out", default="bench_out")
+    p.add_argument("--force", action="store_true", help="overwrite earlier results")
+    a = p.parse_args(argv)
+    names = ("dice_fairness_all.md", "dice_fairness_all.png", "dice_fairness_all.npz")
+    paths = [os.path.join(a.out, x) for x in names]
+    existing = [q for q in paths if os.path.exists(q)]
+    if existing and not a.force:
+        p.error(f"{existing[0]} exists (pass --force to overwrite)")
+    os.makedirs(a.out, exist_ok=True)
+    results, seconds, saved = {}, {}, {}
+    for name in a.dice.split(","):
+        t0 = time.perf_counter()
+        die, out = throw_die(name, a.n)
+        seconds[name] = time.perf_counter() - t0
+        results[name] = frequencies(die, out)
+        saved.update({f"{name}_{k}": v for k, v in out.items()})
+    plot(results, paths[1])
+    lines = [
+        f"# Are the regular dice fair? {a.n} random throws each ({C.device_name()})\n",
+        "| die | at rest on a face | chi² p (equal frequencies) | lowest and highest frequency [95 % interval] | fair value | wall (s, compile included) |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, (counts, freq, lo, hi, used, pvalue) in results.items():
+        i, j = int(np.argmin(freq)), int(np.argmax(freq))
+        lines.append(
+            f"| {name} | {used} / {a.n} | {pvalue:.2f} | {i + 1}: {freq[i]:.3f} [{lo[i]:.3f}, {hi[i]:.3f}]; "
+            f"{j + 1}: {freq[j]:.3f} [{lo[j]:.3f}, {hi[j]:.3f}] | {1 / len(counts):.3f} | {seconds[name]:.0f} |"
+        )
+    lines += ["", "![dice fairness](dice_fairness_all.png)", ""]
+    text = "\n".join(lines)
+    with open(paths[0], "w") as f:
+        f.write(text)
+    np.savez(paths[2], **saved)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
