@@ -3,7 +3,8 @@
 engine, with pictures (docs/contact.md).
 
 N dice (16 mm cube, 4.5 g) and N coins (radius 12 mm, thickness 2 mm, 7.5 g) are thrown from
-heights U(0.05, 0.3) m with a random attitude, spin U(-40, 40) rad/s per body axis and
+heights U(0.05, 0.3) m with a random attitude (about a uniformly random axis, by an angle
+U(0, pi)), spin U(-40, 40) rad/s per body axis and
 horizontal speed U(-0.5, 0.5) m/s onto a floor with restitution U(0.2, 0.8) and friction
 U(0.2, 0.8); saves every 5 ms until T = 4 s (dice: long enough for all to come to rest) or
 2 s (coins: one rolling on its rim without dissipation never stops); `jaxrb.simulate` with
@@ -26,7 +27,10 @@ Each body is checked for what a picture would show:
 
 `--shapes d4,d8,d12,d20` throws the regular polyhedral dice of `jaxrb.dice` (same density as
 the cube); for them the table adds how squarely each ends on a face and how often each number
-came up.
+came up. `--shapes ball_in_bowl,ball_on_cone` throws a ball (20 mm, 50 g) the same way into a
+spherical bowl of radius 0.3 m, or onto a cone of inclination 0.3 rad (apex rounded, radius
+5 cm), both with rolling
+resistance 0.01 (the "floor" of the checks is then that surface).
 
 Writes `contact_throws.md` (the table and the counts), `contact_throws.png` (energy above
 the floor over time, the lowest point's height, the final state) and per shape
@@ -83,12 +87,31 @@ def _polyhedral_die(sides):
 for _sides in (4, 8, 12, 20):
     SHAPES[f"d{_sides}"] = _polyhedral_die(_sides)
     PLURAL[f"d{_sides}"] = f"d{_sides} dice"
+# a ball (20 mm, 50 g) thrown into a bowl of radius 0.3 m or onto a cone of inclination
+# 0.3 rad (its apex rounded, radius 5 cm), with rolling resistance 0.01: the curved
+# surfaces (docs/contact.md, section 8)
+BALL = (0.05, lambda: jaxrb.Sphere(0.02))
+SHAPES["ball_in_bowl"] = (*BALL, 0.02, 4.0)
+SHAPES["ball_on_cone"] = (*BALL, 0.02 / np.cos(0.3), 4.0)
+PLURAL.update(ball_in_bowl="balls in a bowl", ball_on_cone="balls on a cone")
+FLOORS = {
+    "ball_in_bowl": lambda e, mu: jaxrb.Bowl(e, mu, radius=0.3, rolling_resistance=0.01),
+    "ball_on_cone": lambda e, mu: jaxrb.Cone(
+        e, mu, inclination=0.3, rolling_resistance=0.01, tip_radius=0.05
+    ),
+}
 DEFAULT_SHAPES = "die,coin"
 DICE = {f"d{sides}": sides for sides in (4, 8, 12, 20)}
 
 
-def throws(n, seed):
-    """Random initial states and floors (restitution, friction) for n bodies."""
+def throws(n, seed, uniform_attitude=False):
+    """Random initial states and floors (restitution, friction) for n bodies.
+
+    The attitude: a rotation about a uniformly random axis by an angle U(0, pi) (what this
+    sanity study has always used; it favours attitudes near the identity: a rotation angle
+    uniform over all rotations has the density (1 - cos a) / pi), or with
+    `uniform_attitude` uniform over all rotations (a normalised 4-vector of standard
+    normals), as the studies of outcomes need."""
     k = jax.random.split(jax.random.key(seed), 7)
     u = lambda key, lo, hi, shape=(n,): jax.random.uniform(  # noqa: E731
         key, shape, minval=lo, maxval=hi, dtype=jnp.float64
@@ -96,6 +119,9 @@ def throws(n, seed):
     axis = jax.random.normal(k[0], (n, 3), dtype=jnp.float64)
     axis = axis / jnp.linalg.norm(axis, axis=-1, keepdims=True)
     quat = jaxrb.axis_angle_to_quat(axis, u(k[1], 0.0, np.pi))
+    if uniform_attitude:
+        quat = jax.random.normal(k[1], (n, 4), dtype=jnp.float64)
+        quat = quat / jnp.linalg.norm(quat, axis=-1, keepdims=True)
     pos = jnp.stack([jnp.zeros(n), jnp.zeros(n), u(k[2], 0.05, 0.3)], -1)
     vel = jnp.concatenate([u(k[3], -0.5, 0.5, (n, 2)), jnp.zeros((n, 1))], -1)
     omega = u(k[4], -40.0, 40.0, (n, 3))
@@ -114,12 +140,12 @@ def run(kind, n, seed, chunk, rtol, max_impacts):
         scene = jaxrb.Scene(
             jaxrb.RigidBody(mass, shape=shape),
             (jaxrb.Gravity(),),
-            floor=jaxrb.Floor(restitution, friction),
+            floor=FLOORS.get(kind, jaxrb.Floor)(restitution, friction),
         )
         tr = jaxrb.simulate(
             scene, state, ts, max_impacts=max_impacts, throw=False, rtol=rtol, atol=rtol
         )
-        lowest = jax.vmap(lambda p, q: shape.floor_distance(p, q, 0.0))(
+        lowest = jax.vmap(lambda p, q: scene.floor.body_distance(shape, p, q))(
             tr.states.pos, tr.states.quat
         )
         return tr, lowest, jaxrb.energy(scene, tr.states)

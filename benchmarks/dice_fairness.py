@@ -2,8 +2,10 @@
 """Are the regular dice fair? d4, d6, d8, d12 and d20 thrown at random (the contact engine,
 float64).
 
-Each die of `jaxrb.dice` (uniform density, its default edge) is thrown `--n` times with the
-random throws of `contact_throws.py` (height U(0.05, 0.3) m, uniformly random attitude,
+Each die of `jaxrb.dice` (its default edge, uniform density, 4.5 g: the motion under
+gravity and contact does not depend on the mass) is thrown `--n` times with the
+random throws of `contact_throws.py` (height U(0.05, 0.3) m, attitude uniform over all
+rotations,
 spin U(-40, 40) rad/s about each axis, sideways speed U(-0.5, 0.5) m/s; restitution and
 friction U(0.2, 0.8)) and read at T = 4 s (`Die.outcome`: the face up, the face down for a
 d4). Over the throws that end at rest squarely on a face: each number's frequency with its
@@ -52,7 +54,7 @@ DICE = ("d4", "d6", "d8", "d12", "d20")
 def throw_die(name, n, seed=3):
     """`n` random throws of the fair die `name`: the sweep's outputs (numpy)."""
     die = getattr(jaxrb.dice, name)()
-    state, restitution, friction = throws(n, seed)
+    state, restitution, friction = throws(n, seed, uniform_attitude=True)
     rows = dict(state=state, restitution=restitution, friction=friction, offset=jnp.zeros((n, 3)))
     out = jaxrb.sweep(make_throw(die), rows, chunk_size=1, progress=True)
     return die, {k: np.asarray(v) for k, v in out.items()}

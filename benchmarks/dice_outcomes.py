@@ -3,7 +3,7 @@
 dropped with spin against its height (the contact engine, float64).
 
 1. *Fairness.* `--n` random throws (the draws of `contact_throws.py`: heights U(0.05, 0.3) m,
-   random attitude, spin U(-40, 40) rad/s per axis, restitution and friction U(0.2, 0.8))
+   attitude uniform over all rotations, spin U(-40, 40) rad/s per axis, restitution and friction U(0.2, 0.8))
    of a 16 mm, 4.5 g d6 whose mass centre is moved from its centre towards the face
    numbered 2 by each of `--loads` (fractions of the half-edge; 0: the fair die). For each
    load: the frequency of every number with its 95 % Wilson interval, and of 5 (the face
@@ -96,7 +96,7 @@ def settled(out):
 
 def fairness(die, n, loads):
     heavy = int(np.argmin(np.asarray(die.shape.face_normals())[:, 2]))  # the -z face
-    state, restitution, friction = throws(n, seed=1)
+    state, restitution, friction = throws(n, seed=1, uniform_attitude=True)
     L = len(loads)
     rows = dict(
         state=jax.tree.map(lambda x: jnp.concatenate([x] * L), state),

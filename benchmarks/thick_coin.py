@@ -3,8 +3,8 @@
 (the contact engine, float64).
 
 Coins of diameter d = 24 mm and thickness h (`--ratios`: h / d) are thrown `--n` times each
-with the random throws of `contact_throws.py` (height U(0.05, 0.3) m, uniformly random
-attitude, spin U(-40, 40) rad/s about each axis, sideways speed U(-0.5, 0.5) m/s; restitution
+with the random throws of `contact_throws.py` (height U(0.05, 0.3) m, attitude uniform
+over all rotations, spin U(-40, 40) rad/s about each axis, sideways speed U(-0.5, 0.5) m/s; restitution
 and friction U(0.2, 0.8)), the same draws for every thickness. Air resistance on its
 rotation is a damping moment -c w with c = 2 /s times the coin's moment of inertia about a
 diameter: without it (no rolling resistance is modelled for a cylinder) a thin coin rolling
@@ -123,15 +123,21 @@ def outcome(out):
     return np.where(face, FACE, np.where(side, SIDE, UNSETTLED))
 
 
-def study(ratios, n, t_end, seed=2):
-    state, restitution, friction = throws(n, seed)
+def study_rows(ratios, n, seed=2):
+    """The sweep's rows: the same `n` random throws for every thickness ratio."""
+    state, restitution, friction = throws(n, seed, uniform_attitude=True)
     R = len(ratios)
-    rows = dict(
+    return dict(
         state=jax.tree.map(lambda x: jnp.concatenate([x] * R), state),
         restitution=jnp.tile(restitution, R),
         friction=jnp.tile(friction, R),
         ratio=jnp.repeat(jnp.asarray(ratios, float), n),
     )
+
+
+def study(ratios, n, t_end, seed=2):
+    R = len(ratios)
+    rows = study_rows(ratios, n, seed)
     out = jaxrb.sweep(make_throw(t_end), rows, chunk_size=1, progress=True)
     return {k: np.asarray(v).reshape((R, n) + v.shape[1:]) for k, v in out.items()}
 
@@ -143,7 +149,7 @@ def summary(ratios, out):
     settled = np.sum(kind != UNSETTLED, axis=1)
     side = np.sum(kind == SIDE, axis=1)
     freq = side / np.maximum(settled, 1)
-    lo, hi = wilson(side, settled)
+    lo, hi = wilson(side, np.maximum(settled, 1))
     stopped = np.sum(out["code"] == MAX_EVENTS, axis=1)
     return settled, side, freq, lo, hi, stopped
 

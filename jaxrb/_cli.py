@@ -45,7 +45,8 @@ MAX_SWEEP_RUNS = 100_000
 
 _EPILOG_RUN = """\
 examples (SCENE may name one; an existing file of that name takes precedence):
-  die, coin, pendulum, heavy_top     list them: jaxrb run --list; print one: jaxrb run NAME --show
+  die, coin, pendulum, heavy_top, ball_in_bowl, thick_coin
+                                     list them: jaxrb run --list; print one: jaxrb run NAME --show
 
 outputs (in OUTPUT):
   trajectory.npz     arrays t, pos, quat, vel, omega, energy, impact_times, impact_energy_lost;
@@ -756,7 +757,8 @@ def _add_common(p, output=True):
         default=None,
         metavar="SCENE",
         help="a scene file (SCENE.toml) or the name of a shipped example (die, coin, pendulum, "
-        "heavy_top; see jaxrb run --list); default: die, thrown onto a table",
+        "heavy_top, ball_in_bowl, thick_coin; see jaxrb run --list); default: die, thrown "
+        "onto a table",
     )
     if output:
         add_output_options(p)

@@ -101,7 +101,7 @@ class Floor(eqx.Module):
         t1 = t1 / jnp.linalg.norm(t1)
         return n, t1, jnp.cross(n, t1)
 
-    def frame_at(self, centre):
+    def frame_at(self, centre, side=None):
         """The frame of a contact of a body centred at `centre`: the plane's, everywhere."""
         return self.frame(centre.dtype)
 
@@ -110,7 +110,13 @@ class Floor(eqx.Module):
         centre (world), `quat` the unit attitude quaternion."""
         return shape.floor_distance(pos, quat, self.height, self.normal)
 
-    def gap(self, points):
-        """Signed distance (m) of world `points` (..., 3) above the plane (negative below)."""
+    def region(self, centre):
+        """Which part of the surface a body centred at `centre` touches (a plane has one:
+        always 1; see `Cone.region`)."""
+        return jnp.ones((), centre.dtype)
+
+    def gap(self, points, side=None):
+        """Signed distance (m) of world `points` (..., 3) above the plane (negative below);
+        `side` is for surfaces of several parts (`Cone`), here unused."""
         n = self.normal.astype(points.dtype)
         return points @ n - n[2] * self.height.astype(points.dtype)

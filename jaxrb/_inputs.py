@@ -53,6 +53,7 @@ def _floor_checks(floor):
         "spin_resistance": RESULTS.invalid_resistance,
         "radius": RESULTS.invalid_surface,
         "inclination": RESULTS.invalid_surface,
+        "tip_radius": RESULTS.invalid_surface,
     }
     return [(jnp.all(r.ok), codes[r.field]) for r in floor.requirements()]
 

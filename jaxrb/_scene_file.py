@@ -25,7 +25,8 @@ The format is documented, field by field, in the annotated example shipped with 
   (the default; optionally `normal`: a tilted plane through (0, 0, height), its normal,
   world frame, default [0, 0, 1]), "bowl" (`radius`, m: the inside of a sphere whose
   lowest point is (0, 0, height)) or "cone" (`inclination_deg` in (0, 90): the inside of
-  an upright cone with its apex at (0, 0, height)); a bowl or cone meets only a sphere.
+  an upright cone with its apex at (0, 0, height); optional `tip_radius`, m, rounds the
+  apex); a bowl or cone meets only a sphere.
   Optionally `rolling_resistance` and `spin_resistance` >= 0 (a sphere's; see `Floor`).
 - `[joint]`: `type` = "pivot" or "hinge", `point` (body frame, m), `axis` (hinge). A joint
   fixes part of the initial motion: `[initial].vel`, if given, must equal the velocity the
@@ -639,7 +640,7 @@ def _forces(root: _Table):
 _FLOOR_KEYS = {
     "plane": ("normal",),
     "bowl": ("radius",),
-    "cone": ("inclination_deg",),
+    "cone": ("inclination_deg", "tip_radius"),
 }
 
 
@@ -680,6 +681,7 @@ def _floor(root: _Table):
             *contact,
             inclination=math.radians(inclination),
             height=height,
+            tip_radius=floor.number("tip_radius", 0.0, nonnegative=True),
             **resistance,
         )
     normal = floor.vector("normal", default=(0.0, 0.0, 1.0))

@@ -12,7 +12,7 @@ curved surface; any shape meets a plane (`Floor`).
 import equinox as eqx
 import jax.numpy as jnp
 
-from ._checks import Requirement, finite, finite_positive, raise_unmet
+from ._checks import Requirement, finite, finite_nonnegative, finite_positive, raise_unmet
 from ._floor import contact_requirements, set_contact_coefficients
 from ._quaternion import _safe_norm, quat_rotate
 from ._shapes import Sphere
@@ -47,14 +47,23 @@ class AbstractCurvedSurface(eqx.Module):
         concrete values where it is made, a result flag in `simulate` for traced ones."""
         return contact_requirements(self)
 
-    def gap(self, points):
-        """Signed distance (m) of world `points` (..., 3) above the surface."""
+    def gap(self, points, side=None):
+        """Signed distance (m) of world `points` (..., 3) above the surface; `side` (a mode's
+        +1 or -1) picks the part of a surface of several (see `region`), None the part
+        each point is over."""
         raise NotImplementedError
 
-    def frame_at(self, centre):
+    def frame_at(self, centre, side=None):
         """The unit normal n and tangents t1, t2 (world) of the contact of a ball centred
-        at `centre` (3,): n points from the surface towards the centre."""
+        at `centre` (3,): n points from the surface towards the centre (`side` as in
+        `gap`)."""
         raise NotImplementedError
+
+    def region(self, centre):
+        """Where the surface's curvature jumps, the sign of this margin changes with the part
+        a ball centred at `centre` touches (the contact engine ends a segment there, so that
+        no step straddles the jump); 1 for a surface of one smooth part."""
+        return jnp.ones((), centre.dtype)
 
     def body_distance(self, shape, pos, quat):
         """Signed distance (m) of a ball's surface above this one; `pos` the mass centre
@@ -106,12 +115,12 @@ class Bowl(AbstractCurvedSurface):
     def centre(self, dtype=float):
         return jnp.stack([0.0, 0.0, self.height + self.radius]).astype(dtype)
 
-    def gap(self, points):
+    def gap(self, points, side=None):
         return self.radius.astype(points.dtype) - _safe_norm(
             points - self.centre(points.dtype), axis=-1
         )
 
-    def frame_at(self, centre):
+    def frame_at(self, centre, side=None):
         n = self.centre(centre.dtype) - centre
         n = n / _safe_norm(n)
         return (n, *_tangents(n))
@@ -127,6 +136,12 @@ class Cone(AbstractCurvedSurface):
     inclination), t1 = cos(d) e_rho + sin(d) e_z (up the slope), t2 = e_phi. A ball rolling
     without slipping and without spin about n on a horizontal circle of centre radius rho
     goes round at Omega^2 = 5 g tan(d) / (7 rho) (docs/contact.md, section 8).
+
+    `tip_radius` (m, >= 0) rounds the apex: the bottom is then the spherical cap of that
+    radius tangent to the cone (a funnel). A ball of radius r < tip_radius rolls smoothly
+    through the bottom; at a sharp apex (the default, 0) a ball whose centre comes within
+    r sin(d) of the axis would touch the cone along a ring, which is not modelled (the
+    contact jumps from one side to the other: expect inconsistent events there).
     """
 
     restitution: jnp.ndarray
@@ -135,6 +150,7 @@ class Cone(AbstractCurvedSurface):
     spin_resistance: jnp.ndarray
     inclination: jnp.ndarray
     height: jnp.ndarray
+    tip_radius: jnp.ndarray
 
     def __init__(
         self,
@@ -144,17 +160,20 @@ class Cone(AbstractCurvedSurface):
         height=0.0,
         rolling_resistance=0.0,
         spin_resistance=0.0,
+        tip_radius=0.0,
     ):
         set_contact_coefficients(self, restitution, friction, rolling_resistance, spin_resistance)
         self.inclination = jnp.asarray(inclination, dtype=float)
         self.height = jnp.asarray(height, dtype=float)
+        self.tip_radius = jnp.asarray(tip_radius, dtype=float)
 
     def requirements(self):
-        d = self.inclination
+        d, tip = self.inclination, self.tip_radius
         return (
             *super().requirements(),
             Requirement("inclination", d, "in (0, pi/2) rad", (d > 0) & (d < jnp.pi / 2)),
             Requirement("height", self.height, "finite", finite(self.height)),
+            Requirement("tip_radius", tip, "finite and >= 0", finite_nonnegative(tip)),
         )
 
     def _radial(self, x):
@@ -165,15 +184,39 @@ class Cone(AbstractCurvedSurface):
         e_x = jnp.array([1.0, 0.0, 0.0], x.dtype)
         return jnp.where(on_axis, e_x, horizontal / jnp.where(on_axis, 1.0, rho)), rho[..., 0]
 
-    def gap(self, points):
+    def _tip(self, x, side=None):
+        """The rounded tip's centre O (on the axis, tip_radius / cos d above the apex), x - O,
+        and whether x lies where the tip is the nearest part (within d of -e_z seen from O;
+        or, given `side`, whether it is +1)."""
+        d = self.inclination.astype(x.dtype)
+        tip = self.tip_radius.astype(x.dtype)
+        centre = jnp.stack([0.0 * tip, 0.0 * tip, self.height.astype(x.dtype) + tip / jnp.cos(d)])
+        u = x - centre
+        if side is not None:
+            return u, jnp.broadcast_to(side > 0, u.shape[:-1])
+        return u, -u[..., 2] >= _safe_norm(u, axis=-1) * jnp.cos(d)
+
+    def gap(self, points, side=None):
         d = self.inclination.astype(points.dtype)
         _, rho = self._radial(points)
-        return (points[..., 2] - self.height.astype(points.dtype)) * jnp.cos(d) - rho * jnp.sin(d)
+        cone = (points[..., 2] - self.height.astype(points.dtype)) * jnp.cos(d) - rho * jnp.sin(d)
+        u, on_tip = self._tip(points, side)
+        return jnp.where(
+            on_tip, self.tip_radius.astype(points.dtype) - _safe_norm(u, axis=-1), cone
+        )
 
-    def frame_at(self, centre):
+    def region(self, centre):
+        """Positive where a ball centred at `centre` touches the rounded tip, negative where
+        it touches the cone: cos(angle of centre - O from -e_z) - cos(d)."""
+        u, _ = self._tip(centre)
+        d = self.inclination.astype(centre.dtype)
+        return -u[2] / jnp.maximum(_safe_norm(u), jnp.finfo(centre.dtype).tiny) - jnp.cos(d)
+
+    def frame_at(self, centre, side=None):
         d = self.inclination.astype(centre.dtype)
         e_rho, _ = self._radial(centre)
         e_z = jnp.array([0.0, 0.0, 1.0], centre.dtype)
-        n = -jnp.sin(d) * e_rho + jnp.cos(d) * e_z
-        t1 = jnp.cos(d) * e_rho + jnp.sin(d) * e_z
-        return n, t1, jnp.cross(n, t1)
+        u, on_tip = self._tip(centre, side)
+        n = jnp.where(on_tip, -u / _safe_norm(u), -jnp.sin(d) * e_rho + jnp.cos(d) * e_z)
+        e_phi = jnp.cross(e_z, e_rho)
+        return n, jnp.cross(e_phi, n), e_phi

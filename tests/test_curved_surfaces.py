@@ -130,43 +130,86 @@ def test_an_invalid_bowl_is_flagged_per_member_under_vmap(bowl_runs):
     assert np.all(codes[:3] == jaxrb.RESULTS.successful._value)
 
 
+D_CONE, R_CONE_BALL = 0.3, 0.01
+
+
 @jax.jit
-def _round_the_cone(sigma):
-    d, rho, r = 0.3, 0.3, 0.01
-
-    def one(sigma):
-        body = jaxrb.RigidBody(0.05, shape=jaxrb.Sphere(r))
-        scene = jaxrb.Scene(body, (jaxrb.Gravity(),), floor=jaxrb.Cone(0.0, 0.8, inclination=d))
-        # the rate Omega of the steady circle: the positive root of the relation above
-        a, b, c = 1.4 * rho, 0.4 * r * sigma * jnp.tan(d), -G * jnp.tan(d)
-        omega_c = (-b + jnp.sqrt(b * b - 4 * a * c)) / (2 * a)
-        e_rho, e_z, e_phi = jnp.eye(3)[0], jnp.eye(3)[2], jnp.eye(3)[1]
-        n = -jnp.sin(d) * e_rho + jnp.cos(d) * e_z
-        w = -(rho * omega_c / r) * (jnp.cos(d) * e_rho + jnp.sin(d) * e_z) + sigma * n
-        height = (r + rho * jnp.sin(d)) / jnp.cos(d)
-        state0 = jaxrb.make_state(
-            pos=rho * e_rho + height * e_z, vel=rho * omega_c * e_phi, omega=w
-        )
-        ts = jnp.linspace(0.0, 2.0, 21) * 2 * jnp.pi / omega_c  # two turns
+def _on_cone(tip_radius, state0, ts):
+    def one(tip_radius, state0, ts):
+        body = jaxrb.RigidBody(0.05, shape=jaxrb.Sphere(R_CONE_BALL))
+        cone = jaxrb.Cone(0.0, 0.8, inclination=D_CONE, tip_radius=tip_radius)
+        scene = jaxrb.Scene(body, (jaxrb.Gravity(),), floor=cone)
         traj = jaxrb.simulate(scene, state0, ts, rtol=1e-11, atol=1e-11, max_impacts=8)
-        return traj, ts, omega_c, height
+        return traj, jax.vmap(lambda s: jaxrb.energy(scene, s))(traj.states)
 
-    return jax.vmap(one)(sigma)
+    return jax.vmap(one)(tip_radius, state0, ts)
 
 
-def test_ball_rolling_round_a_cone_keeps_the_steady_circle():
-    traj, ts, omega_c, height = _round_the_cone(jnp.array([0.0, 30.0, -50.0]))
-    assert np.all(np.asarray(traj.result._value) == jaxrb.RESULTS.successful._value)
-    assert np.all(np.asarray(traj.contact.kind) == 1) and not np.any(traj.contact.sliding)
-    pos = np.asarray(traj.states.pos)
+def steady_circle(sigma, rho=0.3, d=D_CONE, r=R_CONE_BALL):
+    """The initial state, rate Omega and height of the steady circle (module docstring)."""
+    a, b, c = 1.4 * rho, 0.4 * r * sigma * np.tan(d), -G * np.tan(d)
+    omega_c = (-b + np.sqrt(b * b - 4 * a * c)) / (2 * a)
+    e_rho, e_phi, e_z = np.eye(3)
+    n = -np.sin(d) * e_rho + np.cos(d) * e_z
+    w = -(rho * omega_c / r) * (np.cos(d) * e_rho + np.sin(d) * e_z) + sigma * n
+    height = (r + rho * np.sin(d)) / np.cos(d)
+    state0 = jaxrb.make_state(pos=rho * e_rho + height * e_z, vel=rho * omega_c * e_phi, omega=w)
+    return state0, omega_c, height
+
+
+@pytest.fixture(scope="module")
+def cone_runs():
+    """Three steady circles (sigma = 0, 30, -50 rad/s; two turns each) on a sharp cone, and a
+    ball released from rest on the side of a cone with a rounded tip (radius 5 cm)."""
+    circles = [steady_circle(sigma) for sigma in (0.0, 30.0, -50.0)]
+    # the swing: at rest, centre 15 cm from the axis, on the cone's surface
+    rho0 = 0.15
+    z0 = (R_CONE_BALL + rho0 * np.sin(D_CONE)) / np.cos(D_CONE)
+    states = [c[0] for c in circles] + [jaxrb.make_state(pos=(rho0, 0.0, z0))]
+    state0 = jax.tree.map(lambda *x: jnp.stack(x), *states)
+    ts = [np.linspace(0.0, 2.0, 41) * 2 * np.pi / c[1] for c in circles] + [
+        np.linspace(0.0, 3.0, 41)
+    ]
+    traj, energy = _on_cone(jnp.array([0.0, 0.0, 0.0, 0.05]), state0, jnp.asarray(np.stack(ts)))
+    return traj, energy, circles, np.stack(ts)
+
+
+def test_ball_rolling_round_a_cone_keeps_the_steady_circle(cone_runs):
+    traj, _, circles, ts = cone_runs
+    assert np.all(np.asarray(traj.result._value)[:3] == jaxrb.RESULTS.successful._value)
+    assert np.all(np.asarray(traj.contact.kind)[:3] == 1) and not np.any(traj.contact.sliding[:3])
+    pos = np.asarray(traj.states.pos)[:3]
+    omega_c = np.array([c[1] for c in circles])
+    height = np.array([c[2] for c in circles])
     np.testing.assert_allclose(np.hypot(pos[..., 0], pos[..., 1]), 0.3, atol=1e-10)
-    np.testing.assert_allclose(pos[..., 2] - np.asarray(height)[:, None], 0.0, atol=1e-10)
+    np.testing.assert_allclose(pos[..., 2] - height[:, None], 0.0, atol=1e-10)
     phase = np.unwrap(np.arctan2(pos[..., 1], pos[..., 0]), axis=1)
-    np.testing.assert_allclose(
-        phase - np.asarray(omega_c)[:, None] * np.asarray(ts), 0.0, atol=1e-9
-    )
+    np.testing.assert_allclose(phase - omega_c[:, None] * ts[:3], 0.0, atol=1e-9)
     # sigma = 0: the rolling-only circle, Omega^2 = 5 g tan d / (7 rho)
-    np.testing.assert_allclose(omega_c[0] ** 2, 5 * G * np.tan(0.3) / (7 * 0.3), rtol=1e-12)
+    np.testing.assert_allclose(omega_c[0] ** 2, 5 * G * np.tan(D_CONE) / (7 * 0.3), rtol=1e-12)
+
+
+def test_ball_rolls_through_a_rounded_cone_tip_and_up_the_other_side(cone_runs):
+    """Rolling without slipping keeps the energy: released from rest, the ball rolls down
+    through the rounded bottom (where the contact passes from the cone to the tip's cap and
+    back, its frame turning continuously) and up the other side to its starting height.
+
+    Where the contact passes between cone and cap the surface's curvature jumps (from 0 to
+    1 / tip_radius along the slope): each crossing is an event (cause "junction"), and each
+    segment keeps to one part's geometry, so no step straddles the jump."""
+    traj, energy, _, _ = cone_runs
+    k = 3
+    assert int(np.asarray(traj.result._value)[k]) == jaxrb.RESULTS.successful._value
+    assert int(traj.impacts.count[k]) == 0 and int(traj.contact.inconsistent[k]) == 0
+    assert np.all(np.asarray(traj.contact.kind[k]) == 1) and not np.any(traj.contact.sliding[k])
+    pos = np.asarray(traj.states.pos[k])
+    np.testing.assert_allclose(energy[k], energy[k][0], rtol=1e-10)
+    causes = np.asarray(traj.contact.event_cause[k])[: int(traj.contact.events[k]) + 1]
+    assert np.sum(causes == jaxrb.contact.CAUSES.index("junction")) >= 4  # 2 per pass
+    gap = np.asarray(jax.vmap(jaxrb.Cone(0.0, inclination=D_CONE, tip_radius=0.05).gap)(pos))
+    np.testing.assert_allclose(gap - R_CONE_BALL, 0.0, atol=1e-10)
+    np.testing.assert_allclose(pos[:, 1], 0.0, atol=1e-12)  # it stays in its vertical plane
+    assert pos[:, 0].min() < -0.149  # it reached the other side, 15 cm out (to the saves)
 
 
 def test_curved_surfaces_meet_only_a_ball_and_check_their_dimensions():

@@ -13,7 +13,9 @@ set to a large value; the event is the first zero of their minimum:
   stopped or turned back; a slip that only turns, as a coin's on its rim, does not end a
   segment); and a face's centre-of-pressure
   margin (m/s^2: N/m times the distance inside its support region over its friction
-  radius).
+  radius); and on a curved surface whose curvature jumps (a rounded cone's tip), the
+  junction margin times the mode's `side` (it fires when the ball passes to the other part,
+  so that no step straddles the jump).
 
 Every condition must start positive: diffrax fires on a downward crossing only, so one that
 started at or below zero would disarm the whole event (impacts included). A condition that
@@ -29,9 +31,10 @@ import optimistix as optx
 from .._quaternion import _safe_norm
 from ._modes import FACE, PAIR, POINT, Solution, active_points
 
-NORMAL_A, NORMAL_B, CONE_A, CONE_B, AXIAL, SLIP_A, SLIP_B, COP = range(8)
-NUM_FORCE_CONDITIONS = 8
+NORMAL_A, NORMAL_B, CONE_A, CONE_B, AXIAL, SLIP_A, SLIP_B, COP, JUNCTION = range(9)
+NUM_FORCE_CONDITIONS = 9
 UNUSED = 1e30
+JUNCTION_TOL = 1e-12  # of the junction margin (a difference of cosines)
 
 
 def _sqrt_pos(x):
@@ -104,7 +107,9 @@ def conditions(sol: Solution, mode, model, scene, tol) -> jax.Array:
     end_b = slip_condition(slip_b, dir_b, mode.from_rest[1])
     force = force.at[SLIP_A].set(jnp.where(holds & ~mode.stick[0], end_a, big))
     force = force.at[SLIP_B].set(jnp.where((kind == PAIR) & ~mode.stick[1], end_b, big))
-    return jnp.concatenate([gaps, force])
+    # the ball passes to another part of a curved surface (its curvature jumps there)
+    junction = jnp.where(scene.floor.curved, mode.side * geom.region, big)
+    return jnp.concatenate([gaps, force, junction[None]])
 
 
 def cause_of(trigger, model) -> jax.Array:
@@ -113,8 +118,16 @@ def cause_of(trigger, model) -> jax.Array:
     k = trigger - P
     flat = jnp.asarray(model.flat_points)[jnp.clip(trigger, 0, P - 1)]
     return jnp.select(
-        [trigger < 0, (trigger < P) & ~flat, trigger < P, k <= NORMAL_B, k <= AXIAL, k <= SLIP_B],
-        [0, 1, 2, 3, 4, 5],
+        [
+            trigger < 0,
+            (trigger < P) & ~flat,
+            trigger < P,
+            k <= NORMAL_B,
+            k <= AXIAL,
+            k <= SLIP_B,
+            k == JUNCTION,
+        ],
+        [0, 1, 2, 3, 4, 5, 7],
         6,
     )
 
@@ -124,7 +137,7 @@ def condition_tolerances(model, tol, dtype) -> jax.Array:
     conditions, a quarter of the blend speed for the slips."""
     P = model.num_points
     slip = 0.25 * tol.slip_blend
-    force = np.array([tol.force] * 5 + [slip, slip] + [tol.force])
+    force = np.array([tol.force] * 5 + [slip, slip] + [tol.force, JUNCTION_TOL])
     return jnp.asarray(np.concatenate([np.full(P, tol.penetration), force]), dtype)
 
 

@@ -51,6 +51,8 @@ class Mode(eqx.Module):
     - `from_rest`: (2,) bool, whether the slide of point a (or the face) / point b started
       from zero slip (its end is then detected as the slip turning back, not stopping).
     - `seed`: (3,) body-frame direction used for a rim point when its cap lies flat.
+    - `side`: +1 or -1, the sign of the surface's `region` margin during the segment (a
+      curved surface whose curvature jumps: which part the ball touches).
     """
 
     kind: jax.Array
@@ -62,6 +64,7 @@ class Mode(eqx.Module):
     twist_dir: jax.Array
     from_rest: jax.Array
     seed: jax.Array
+    side: jax.Array
 
 
 def flight_mode(dtype) -> Mode:
@@ -76,6 +79,7 @@ def flight_mode(dtype) -> Mode:
         twist_dir=jnp.zeros(3, dtype),
         from_rest=jnp.zeros(2, bool),
         seed=jnp.array([1.0, 0.0, 0.0], dtype),
+        side=jnp.ones((), dtype),
     )
 
 
@@ -154,6 +158,7 @@ class CandidateTable:
             twist_dir=like.twist_dir,
             from_rest=like.from_rest,
             seed=like.seed,
+            side=like.side,
         )
 
 
@@ -178,7 +183,8 @@ class Geometry(eqx.Module):
     """The contact kinematics of a state, world frame: the surface's normal n and tangents
     t1, t2 at the contact and their rates (zero on a plane); the rotation R and angular
     velocity w; the contact points' offsets r (P, 3) from the mass centre, their rates
-    r' (P, 3), gaps g (P,), gap rates g' (P,) and slips (P, 3)."""
+    r' (P, 3), gaps g (P,), gap rates g' (P,) and slips (P, 3); `region`: the surface's
+    region margin at the body's centre (see `Mode.side`)."""
 
     n: jax.Array
     t1: jax.Array
@@ -193,15 +199,17 @@ class Geometry(eqx.Module):
     gap: jax.Array
     gap_rate: jax.Array
     slip: jax.Array
+    region: jax.Array
 
     def tangential(self, x):
         return x - (x @ self.n)[..., None] * self.n
 
 
-def surface_frame(state: State, scene, model, R, w):
+def surface_frame(state: State, scene, model, R, w, side=None):
     """The contact frame (n, t1, t2) and its rate (world). On a plane it is the plane's; on
     a curved surface it is taken at the ball's centre, c = x + R offset, and differentiated
-    along the centre's velocity c' = v + w x (R offset)."""
+    along the centre's velocity c' = v + w x (R offset); `side` picks the part of the
+    surface (None: the part the ball is over)."""
     surface = scene.floor
     dtype = state.pos.dtype
     if not surface.curved:
@@ -209,11 +217,13 @@ def surface_frame(state: State, scene, model, R, w):
         return surface.frame(dtype), (zero, zero, zero)
     arm = R @ model.offset.astype(dtype)
     centre, centre_vel = state.pos + arm, state.vel + cross(w, arm)
-    return jax.jvp(surface.frame_at, (centre,), (centre_vel,))
+    return jax.jvp(lambda c: surface.frame_at(c, side), (centre,), (centre_vel,))
 
 
-def geometry(state: State, scene, model, seed) -> Geometry:
-    """Contact kinematics at `state` (unit quaternion).
+def geometry(state: State, scene, model, seed, side=None) -> Geometry:
+    """Contact kinematics at `state` (unit quaternion); `side`: the part of a curved surface
+    whose geometry is used (a mode's `side`; None: the part the ball is over), so that a
+    segment keeps to one part's geometry up to the junction where it ends.
 
     A contact point p(d) may depend on the surface's normal in the body frame, d = R^T n (a
     support point); then its offset r = R p(d) moves at r' = w x r + R p'(d)[d'], with
@@ -222,7 +232,7 @@ def geometry(state: State, scene, model, seed) -> Geometry:
     """
     R = quat_to_matrix(state.quat)
     w = R @ state.omega
-    (n, t1, t2), (n_dot, t1_dot, t2_dot) = surface_frame(state, scene, model, R, w)
+    (n, t1, t2), (n_dot, t1_dot, t2_dot) = surface_frame(state, scene, model, R, w, side)
     down = R.T @ n
     down_dot = cross(down, state.omega) + R.T @ n_dot
     if model.moving_points:
@@ -232,11 +242,14 @@ def geometry(state: State, scene, model, seed) -> Geometry:
         p_dot = jnp.zeros_like(p)
     r = p @ R.T
     r_dot = cross(w, r) + p_dot @ R.T
-    gap = scene.floor.gap(state.pos + r)
+    gap = scene.floor.gap(state.pos + r, side)
     vel = state.vel + cross(w, r)
     gap_rate = vel @ n
     slip = vel - gap_rate[:, None] * n
-    return Geometry(n, t1, t2, n_dot, t1_dot, t2_dot, R, w, r, r_dot, gap, gap_rate, slip)
+    region = jnp.ones((), state.pos.dtype)
+    if scene.floor.curved:
+        region = scene.floor.region(state.pos + R @ model.offset.astype(state.pos.dtype))
+    return Geometry(n, t1, t2, n_dot, t1_dot, t2_dot, R, w, r, r_dot, gap, gap_rate, slip, region)
 
 
 def unit_or(x, fallback):
@@ -488,7 +501,7 @@ def solve_mode(t, state: State, mode: Mode, scene, model, tol, hats=None, geom=N
     body = scene.body
     dtype = state.pos.dtype
     if geom is None:
-        geom = geometry(state, scene, model, mode.seed)
+        geom = geometry(state, scene, model, mode.seed, mode.side)
     if hats is None:
         twist, _ = face_twist(state, geom, model, mode.face)
         hats = sliding_hats(geom, twist, mode, tol.slip_blend)

@@ -38,7 +38,7 @@ def project_positions(state: State, mode, scene, model, iterations: int = 2) -> 
     """Active gaps and a face's tilt brought to zero."""
     dtype = state.pos.dtype
     for _ in range(iterations):
-        geom = geometry(state, scene, model, mode.seed)
+        geom = geometry(state, scene, model, mode.seed, mode.side)
         rows = mode_rows(state, geom, mode, _zero_hats(dtype), 0.0, scene, model)
         delta = _correction(rows.J, rows.holonomic, rows.pos, scene.body, geom.R)
         turn = delta[3:]
@@ -52,7 +52,7 @@ def project_velocities(state: State, mode, scene, model, slip_stop) -> State:
     """Normal velocities of the active contacts, and the slips of those that stick or start
     to slide from rest (slip below `slip_stop`), brought to zero."""
     dtype = state.pos.dtype
-    geom = geometry(state, scene, model, mode.seed)
+    geom = geometry(state, scene, model, mode.seed, mode.side)
     rows = mode_rows(state, geom, mode, _zero_hats(dtype), 0.0, scene, model)
     kind = mode.kind
     still_a = _safe_norm(geom.slip[mode.a]) <= slip_stop

@@ -105,5 +105,5 @@ class ContactLog(eqx.Module):
     event_sliding: jax.Array
 
 
-CAUSES = ("start", "touch", "flat", "lift-off", "slip starts", "slip stops", "tip")
+CAUSES = ("start", "touch", "flat", "lift-off", "slip starts", "slip stops", "tip", "junction")
 """The names of the event causes, indexed by the codes in `ContactLog.event_cause`."""

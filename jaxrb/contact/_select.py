@@ -288,7 +288,7 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip):
     _, hats, sol = jax.lax.fori_loop(0, FIXED_POINT_ITERATIONS + 1, iterate, (hats0, hats0, held))
     P = model.num_points
     force = conditions(sol, mode, model, scene, tol)[P:]
-    keep = jnp.array([True] * 5 + [False, False, True])  # not the slip speeds
+    keep = jnp.array([True] * 5 + [False, False, True, False])  # not the slips, junction
     force = jnp.where(keep, force, UNUSED)
     gap_acc = sol.point_accelerations() @ geom.n
     gap_margin = jnp.where(resting & ~active_points(model, mode), gap_acc, UNUSED)

@@ -9,7 +9,7 @@ from .._dynamics import accelerations
 from .._invariants import energy
 from .._quaternion import _safe_norm
 from .._state import State
-from ._events import COP
+from ._events import COP, JUNCTION
 from ._impact_law import solve_impacts
 from ._modes import (
     FACE,
@@ -125,7 +125,13 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol) -> EventOutcom
         down = jax.lax.stop_gradient(geom.R.T @ geom.n)
         seed = model.rim_seed(down, jnp.where(tipped, cop_offset, 0.0), mode.seed)
         mode = eqx.tree_at(lambda m: m.seed, mode, seed)
-    geom = geometry(state, scene, model, mode.seed)
+    # the part of a curved surface the ball now touches: past a junction the other one, else
+    # where it is (the next segment keeps to that part's geometry, the `side` of its mode)
+    crossed = ~impact & (trigger == model.num_points + JUNCTION)
+    region = geometry(state, scene, model, mode.seed).region
+    side = jnp.where(crossed, -mode.side, jnp.where(region >= 0, 1.0, -1.0)).astype(dtype)
+    mode = eqx.tree_at(lambda m: m.side, mode, side)
+    geom = geometry(state, scene, model, mode.seed, mode.side)
     resting = touching & (jnp.abs(geom.gap_rate) <= tol.slip_stop)
     zero_slip = _safe_norm(geom.slip) <= tol.slip_stop
     trigger = jnp.where(impact, -1, trigger)
