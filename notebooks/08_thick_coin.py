@@ -48,9 +48,11 @@
 #   **P(side) = (2 / pi) atan(h / d)**, a third when atan(h / d) = pi / 6, at
 #   **h / d = 1 / sqrt(3) = 0.577**.
 #
-# A coin that bounces and rolls can still fall from its side onto a face: for a thin coin the
-# side is then much rarer than the closed forms say (the nickel's 1 in 6000 against the values
-# printed below).
+# A real coin that bounces and rolls can still fall from its side onto a face: for a thin coin
+# the side is then much rarer than the closed forms say (the nickel's 1 in 6000 against the
+# values printed below). jaxrb's ideal sharp-edged cylinder does the opposite: it lands on its
+# side *more* often than the closed forms say, because once it rolls upright on its band,
+# held by both rims, nothing tips it over (docs/contact.md, section 10, "The thick coin").
 
 # %%
 import jax
@@ -88,9 +90,10 @@ print(
 # friction, rolling, sliding and resting contact; docs/contact.md):
 #
 # - **the throws** are those of `benchmarks/contact_throws.py`, the same draws for every
-#   thickness: released from a height drawn in [0.05, 0.3] m, with a random attitude, a spin
-#   drawn in [-40, 40] rad/s about each body axis and a sideways speed drawn in [-0.5, 0.5]
-#   m/s along x and y; each throw lands on its own floor, with restitution and friction each
+#   thickness: released from a height drawn in [0.05, 0.3] m, with an attitude uniform over
+#   all rotations, a spin drawn in [-40, 40] rad/s about each body axis and a sideways speed
+#   drawn in [-0.5, 0.5] m/s along x and y; each throw lands on its own floor, with
+#   restitution and friction each
 #   drawn in [0.2, 0.8]. A thick coin that would start through the floor is lifted clear of
 #   it by 1 mm. The coin does bounce: this is the Murray–Teare problem, not the non-bouncing
 #   one of the closed forms.

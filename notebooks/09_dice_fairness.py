@@ -32,9 +32,10 @@
 #
 # **The throws** (`benchmarks/dice_fairness.py`, with the draws of
 # `benchmarks/contact_throws.py`): each throw releases the die from a height drawn in
-# [0.05, 0.3] m, with a random attitude, a spin drawn in [-40, 40] rad/s about each body axis
-# and a sideways speed drawn in [-0.5, 0.5] m/s along x and y, onto a floor of its own whose
-# restitution and friction are each drawn in [0.2, 0.8]. Gravity and contact act, no air. The
+# [0.05, 0.3] m, with an attitude uniform over all rotations, a spin drawn in [-40, 40] rad/s
+# about each body axis and a sideways speed drawn in [-0.5, 0.5] m/s along x and y, onto a
+# floor of its own whose restitution and friction are each drawn in [0.2, 0.8]. Gravity and
+# contact act, no air. The
 # die bounces, rolls, rocks and slides until it rests (docs/contact.md); the number is read at
 # T = 4 s. A throw counts if it succeeded and the die rests squarely on a face (alignment
 # within 1e-9 of 1, speed below 1e-6 m/s); the others are counted and left out.

@@ -4,9 +4,9 @@ The loaded die's mass centre sits half-way from its centre towards the face numb
 shape's offset, the centroid relative to the mass centre, points the other way), so it should
 come to rest on that face and show the opposite number, 5, more often than 1/6; the fair die
 should show every number about equally. Both are judged by 99 % Wilson score intervals (and
-the fair one also by a chi-square test). 60 throws per die, drawn as in the contact study
-`benchmarks/contact_throws.py`; the benchmark `benchmarks/dice_outcomes.py` throws
-thousands.
+the fair one also by a chi-square test). 60 throws per die, drawn as in the studies of
+`benchmarks/` (the attitude uniform over all rotations, so that no number starts on top more
+often than another); the benchmark `benchmarks/dice_outcomes.py` throws thousands.
 """
 
 import equinox as eqx
@@ -30,18 +30,16 @@ def wilson(count, n, z=Z99):
 
 
 def throws(n, seed):
-    """Random throws: heights U(0.05, 0.3) m, a uniformly random axis turned U(0, pi), spin
-    U(-40, 40) rad/s per body axis, horizontal speed U(-0.5, 0.5) m/s, restitution and
-    friction U(0.2, 0.8)."""
+    """Random throws: heights U(0.05, 0.3) m, the attitude uniform over all rotations (a
+    normalised 4-vector of standard normals), spin U(-40, 40) rad/s per body axis, horizontal
+    speed U(-0.5, 0.5) m/s, restitution and friction U(0.2, 0.8)."""
     k = jax.random.split(jax.random.key(seed), 7)
 
     def u(key, lo, hi, shape=(n,)):
         return jax.random.uniform(key, shape, minval=lo, maxval=hi, dtype=jnp.float64)
 
-    axis = jax.random.normal(k[0], (n, 3), dtype=jnp.float64)
-    quat = jaxrb.axis_angle_to_quat(
-        axis / jnp.linalg.norm(axis, axis=-1, keepdims=True), u(k[1], 0.0, np.pi)
-    )
+    quat = jax.random.normal(k[0], (n, 4), dtype=jnp.float64)
+    quat = quat / jnp.linalg.norm(quat, axis=-1, keepdims=True)
     pos = jnp.stack([jnp.zeros(n), jnp.zeros(n), u(k[2], 0.05, 0.3)], -1)
     vel = jnp.concatenate([u(k[3], -0.5, 0.5, (n, 2)), jnp.zeros((n, 1))], -1)
     state = jaxrb.make_state(pos=pos, quat=quat, vel=vel, omega=u(k[4], -40.0, 40.0, (n, 3)))
