@@ -608,12 +608,17 @@ def cmd_sweep(args) -> int:
         raise CLIError(f"--draws must be >= 1, got {draws}")
     params = [_parse_param(p) for p in args.param]
     ranges = [_parse_random(r) for r in args.random]
-    names = [n for n, _ in params] + [n for n, _ in ranges]
+    grid_names = [n for n, _ in params]
+    names = grid_names + [n for n, _ in ranges]
+    if len(set(grid_names)) != len(grid_names):
+        raise CLIError("each --param PATH may be given once")
     if len(set(names)) != len(names):
         raise CLIError("each PATH may be given once (in --param or --random)")
-    runs = math.prod(len(v) for _, v in params) * draws
+    points = math.prod(len(v) for _, v in params)
+    runs = points * draws
     if runs > MAX_SWEEP_RUNS:
-        raise CLIError(f"the sweep has {runs} runs: a sweep has at most {MAX_SWEEP_RUNS}")
+        size = f"{points} points" + (f" x {draws} draws" if randomised else "")
+        raise CLIError(f"the grid has {size}: a sweep has at most {MAX_SWEEP_RUNS} runs")
     grid = [
         point + draw
         for point in itertools.product(*[v for _, v in params])
