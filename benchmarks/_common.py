@@ -8,6 +8,7 @@ body, body-steps per second where steps are known, and the compile time separate
 
 import dataclasses
 import math
+import os
 import statistics
 import time
 
@@ -32,6 +33,17 @@ class Row:
         if math.isnan(self.steps) or self.us_per_body <= 0:
             return math.nan
         return self.steps / (self.us_per_body * 1e-6)
+
+
+def output_paths(parser, out, names, force):
+    """The paths of the result files `names` in the folder `out` (made if missing); the
+    parser's usage error if one exists already and `force` is not set."""
+    paths = [os.path.join(out, name) for name in names]
+    existing = [q for q in paths if os.path.exists(q)]
+    if existing and not force:
+        parser.error(f"{existing[0]} exists (pass --force to overwrite)")
+    os.makedirs(out, exist_ok=True)
+    return paths
 
 
 def device_name() -> str:

@@ -295,12 +295,8 @@ def main(argv=None):
             p.error(f"--shapes: unknown shape {kind!r} (known: {', '.join(SHAPES)})")
     default = args.shapes == DEFAULT_SHAPES
     stem = "contact_throws" if default else "contact_throws_" + "_".join(shapes)
-    paths = [os.path.join(args.out, stem + ext) for ext in (".md", ".png")]
-    paths += [os.path.join(args.out, f"contact_throws_{kind}.npz") for kind in shapes]
-    existing = [q for q in paths if os.path.exists(q)]
-    if existing and not args.force:
-        p.error(f"{existing[0]} exists (pass --force to overwrite)")
-    os.makedirs(args.out, exist_ok=True)
+    names = [stem + ".md", stem + ".png"] + [f"contact_throws_{kind}.npz" for kind in shapes]
+    paths = C.output_paths(p, args.out, names, args.force)
     device = C.device_name()
     results, lines, faces_notes = {}, [], []
     lines.append(

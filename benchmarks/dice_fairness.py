@@ -22,7 +22,6 @@ Run: python -m benchmarks.dice_fairness --n 1000 --out bench_out
 """
 
 import argparse
-import os
 import time
 
 import jax
@@ -100,11 +99,7 @@ def main(argv=None):
     p.add_argument("--force", action="store_true", help="overwrite earlier results")
     a = p.parse_args(argv)
     names = ("dice_fairness_all.md", "dice_fairness_all.png", "dice_fairness_all.npz")
-    paths = [os.path.join(a.out, x) for x in names]
-    existing = [q for q in paths if os.path.exists(q)]
-    if existing and not a.force:
-        p.error(f"{existing[0]} exists (pass --force to overwrite)")
-    os.makedirs(a.out, exist_ok=True)
+    paths = C.output_paths(p, a.out, names, a.force)
     results, seconds, saved = {}, {}, {}
     for name in a.dice.split(","):
         t0 = time.perf_counter()

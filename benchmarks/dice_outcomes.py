@@ -26,7 +26,6 @@ Run: python -m benchmarks.dice_outcomes --n 1000 --out bench_out
 """
 
 import argparse
-import os
 import time
 
 import jax
@@ -200,13 +199,9 @@ def main(argv=None):
     a = p.parse_args(argv)
     loads = [float(x) for x in a.loads.split(",")]
     names = ("dice_outcomes.md", "dice_fairness.png", "dice_outcome_map.png", "dice_outcomes.npz")
-    paths = [os.path.join(a.out, name) for name in names]
-    existing = [q for q in paths if os.path.exists(q)]
     if min(float(x) for x in a.height_range.split(",")) < 0.014:
         p.error("--height-range: the die starts below the floor under 0.014 m")
-    if existing and not a.force:
-        p.error(f"{existing[0]} exists (pass --force to overwrite)")
-    os.makedirs(a.out, exist_ok=True)
+    paths = C.output_paths(p, a.out, names, a.force)
     die = jaxrb.dice.d6(EDGE)
     device = C.device_name()
 

@@ -36,7 +36,6 @@ Run: python -m benchmarks.thick_coin --n 100 --out bench_out
 """
 
 import argparse
-import os
 import time
 
 import jax
@@ -195,16 +194,13 @@ def main(argv=None):
     a = p.parse_args(argv)
     ratios = [float(x) for x in a.ratios.split(",")]
     names = ["thick_coin.md", "thick_coin.png", "thick_coin.npz"]
-    os.makedirs(a.out, exist_ok=True)
-    existing = [q for q in (os.path.join(a.out, x) for x in names) if os.path.exists(q)]
-    if existing and not a.force:
-        p.error(f"{existing[0]} exists (pass --force to overwrite)")
+    paths = C.output_paths(p, a.out, names, a.force)
     t0 = time.perf_counter()
     out = study(ratios, a.n, a.t_end)
     wall = time.perf_counter() - t0
     settled, side, freq, lo, hi, stopped = summary(ratios, out)
-    np.savez(os.path.join(a.out, "thick_coin.npz"), ratios=ratios, **out)
-    plot(np.asarray(ratios), freq, lo, hi, os.path.join(a.out, "thick_coin.png"))
+    np.savez(paths[2], ratios=ratios, **out)
+    plot(np.asarray(ratios), freq, lo, hi, paths[1])
     lines = [
         f"Thick coin, {a.n} throws per thickness, T = {a.t_end} s, {wall:.0f} s wall on "
         f"{C.device_name()} ({wall / (a.n * len(ratios)):.2f} s per throw, compile included).",
@@ -218,7 +214,7 @@ def main(argv=None):
             f"| {side_uniform(r):.3f} | {side_flipped(r):.3f} |"
         )
     text = "\n".join(lines) + "\n"
-    with open(os.path.join(a.out, "thick_coin.md"), "w") as f:
+    with open(paths[0], "w") as f:
         f.write(text)
     print(text)
 
