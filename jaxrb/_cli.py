@@ -35,10 +35,12 @@ from ._cli_common import (
     StagedOutput,
     _fmt,
     _table,
+    add_cache_option,
     add_output_options,
     one_line,
 )
 from ._cli_fit import add_fit_parser
+from ._compilation import speed_up_compilation
 
 MAX_SWEEP_RUNS = 100_000
 """The most grid points (runs) one `jaxrb sweep` may have."""
@@ -767,6 +769,7 @@ def _add_common(p, output=True):
     )
     if output:
         add_output_options(p)
+    add_cache_option(p)
     p.add_argument(
         "--progress",
         action=argparse.BooleanOptionalAction,
@@ -907,6 +910,7 @@ def _run_or_sweep(args) -> int:
                 return _show(args)
             import jax
 
+            speed_up_compilation(cache=not args.no_cache)
             jax.config.update("jax_enable_x64", True)
             return args.func(args)
     except (CLIError, SceneFileError) as e:
@@ -964,6 +968,7 @@ def main(argv=None) -> int:
         return _run_or_sweep(args)
     import jax
 
+    speed_up_compilation(cache=not getattr(args, "no_cache", False))
     jax.config.update("jax_enable_x64", True)
     from ._scene_file import SceneFileError
 

@@ -36,6 +36,17 @@ def add_output_options(parser) -> None:
     )
 
 
+def add_cache_option(parser) -> None:
+    """`--no-cache`: the same for every command that compiles a simulation."""
+    parser.add_argument(
+        "--no-cache",
+        action="store_true",
+        help="do not read or write compiled programs in the persistent compilation cache "
+        "($JAXRB_CACHE_DIR, default ~/.cache/jaxrb/jax), which makes a second run of the "
+        "same kind of scene start quicker",
+    )
+
+
 def _outputs_free(outdir: Path, names, force: bool):
     """Raise a CLIError if any output exists and --force was not given."""
     existing = [outdir / n for n in names if (outdir / n).exists()]

@@ -29,6 +29,7 @@ from ._cli_common import (
     StagedOutput,
     _fmt,
     _table,
+    add_cache_option,
     add_output_options,
     check_output,
     one_line,
@@ -1216,6 +1217,7 @@ def add_fit_parser(sub):
             "data", nargs="?", default=None, metavar="DATA", help="data file: .csv or .npz"
         )
         add_output_options(p)
+        add_cache_option(p)
         p.add_argument(
             "--write-example",
             metavar="FILE",

@@ -11,10 +11,12 @@ import jax.numpy as jnp
 
 
 def solve(A, b):
-    """x with A x = b, for a small square `A` (n, n) and `b` (n,): Gaussian elimination with
-    partial pivoting, unrolled over the n columns."""
+    """x with A x = b, for a small square `A` (n, n) and `b` (n,) or (n, m): Gaussian
+    elimination with partial pivoting, unrolled over the n columns."""
     n = A.shape[-1]
-    M = jnp.concatenate([A, b[:, None]], axis=1)
+    vector = b.ndim == 1
+    B = b[:, None] if vector else b
+    M = jnp.concatenate([A, B], axis=1)
     rows = jnp.arange(n)
     for k in range(n):
         col = jnp.where(rows >= k, jnp.abs(M[:, k]), -1.0)
@@ -23,10 +25,10 @@ def solve(A, b):
         pivot = M[k, k]
         factors = jnp.where(rows > k, M[:, k] / pivot, 0.0)
         M = M - factors[:, None] * M[k]
-    x = jnp.zeros(n, A.dtype)
+    x = jnp.zeros(B.shape, A.dtype)
     for k in reversed(range(n)):
-        x = x.at[k].set((M[k, n] - M[k, :n] @ x) / M[k, k])
-    return x
+        x = x.at[k].set((M[k, n:] - M[k, :n] @ x) / M[k, k])
+    return x[:, 0] if vector else x
 
 
 def inverse3(J):

@@ -32,15 +32,17 @@ from ._features import contact_model
 from ._modes import FLIGHT, PAIR, flight_mode, mode_rates, solve_mode, unit_state
 from ._options import ContactOptions
 from ._record import ContactLog, add_impact, empty_impacts
-from ._step_limit import gap_step_limit, limited
+from ._step_limit import gap_step_limit, limited, step_limit_of
 from ._transition import at_event
 
 
 class _Segment(eqx.Module):
-    """The arguments of a segment's right-hand side and event function."""
+    """The arguments of a segment's right-hand side, event function and step limit:
+    its mode, the shifts of its conditions, and the step limit at its start (s)."""
 
     mode: object
     offsets: jax.Array
+    limit0: jax.Array
 
 
 def _sliding(mode):
@@ -249,7 +251,9 @@ def _simulate_contact(
         moves_on = do & ~paradox
         mode = jax.tree.map(lambda a, b: jnp.where(moves_on, a, b), out.mode, carry["mode"])
         y = jax.tree.map(lambda a, b: jnp.where(moves_on, a, b), out.state, carry["y"])
-        offsets = start_offsets(values(t0, y, mode), cond_tol)
+        start = solve_mode(t0, unit_state(y), mode, scene, model, tol)
+        offsets = start_offsets(conditions(start, mode, model, scene, tol), cond_tol)
+        limit0 = step_limit_of(start, mode, offsets, model, tol)
         done = done | too_many | paradox
         t0 = jnp.where(done, t_end, t0)
         sol = dfx.diffeqsolve(
@@ -259,7 +263,7 @@ def _simulate_contact(
             t1=t_end,
             dt0=dt0,
             y0=y,
-            args=_Segment(mode, offsets),
+            args=_Segment(mode, offsets, limit0),
             saveat=dfx.SaveAt(
                 subs=[dfx.SubSaveAt(ts=jnp.clip(ts, t0, t_end)), dfx.SubSaveAt(t1=True)]
             ),

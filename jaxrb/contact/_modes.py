@@ -260,10 +260,13 @@ def unit_or(x, fallback):
 
 
 def cross(a, b):
-    """a x b over the last axis (plain jnp ops: small and quick to compile)."""
-    a1, a2, a3 = a[..., 0], a[..., 1], a[..., 2]
-    b1, b2, b3 = b[..., 0], b[..., 1], b[..., 2]
-    return jnp.stack([a2 * b3 - a3 * b2, a3 * b1 - a1 * b3, a1 * b2 - a2 * b1], axis=-1)
+    """a x b over the last axis, with cyclic shifts of the components (a few elementwise
+    operations: quick to compile and to run)."""
+
+    def shift(x, k):  # (x_{i+k}) for i = 0, 1, 2
+        return jnp.concatenate([x[..., k:], x[..., :k]], axis=-1)
+
+    return shift(a, 1) * shift(b, 2) - shift(a, 2) * shift(b, 1)
 
 
 class Rows(eqx.Module):
@@ -517,6 +520,83 @@ def solve_mode(t, state: State, mode: Mode, scene, model, tol, hats=None, geom=N
     u_dot = u0_dot + lam @ minv_C
     acc, alpha = u_dot[:3], u_dot[3:]
     return Solution(acc, alpha, geom.R.T @ alpha, lam, rows, geom, hats)
+
+
+class SlidingSolver(eqx.Module):
+    """A mode's solution as a function of the directions its sliding friction opposes, for
+    the searches of a direction in which a contact at rest starts to slide
+    (`_select.py`), which try many directions at one state.
+
+    Only the force columns of slots 0 and 1 depend on the directions (a sliding point's
+    normal column n - mu s_hat, a sliding face's force and couple), and affinely, so the
+    matrix of the rows is A(s) = A0 + u0(s) e0^T + u1(s) e1^T with A0 the matrix at zero
+    directions. With A0^-1 applied once to the right-hand side and to the columns' rates,
+    each direction costs a 2 x 2 solve (Sherman-Morrison-Woodbury) instead of a 6 x 6 one:
+    the same solution, up to roundoff, as `solve_mode` with those `hats`.
+    """
+
+    rows: Rows  # at zero directions
+    d_columns: jax.Array  # (3, 3, 6, 6): dC / d(hat j, component c)
+    minv_columns: jax.Array  # (6, 6): M^-1 C at zero directions
+    d_minv_columns: jax.Array  # (3, 3, 6, 6)
+    lam0: jax.Array  # (6,): A0^-1 rhs
+    d_lam: jax.Array  # (3, 3, 6, 2): A0^-1 (the rate of columns 0 and 1 of A)
+    u0_dot: jax.Array  # (6,): (a, alpha) from the forces alone
+    geom: Geometry
+
+    def __call__(self, hats) -> Solution:
+        H = jnp.stack(hats)  # (3, 3): the directions at a, at b, of the face's twist
+        Y = jnp.einsum("jc,jcik->ik", H, self.d_lam)  # A0^-1 [u0(s), u1(s)]
+        # (A0 + U V^T)^-1 rhs = x0 - Y (1 + V^T Y)^-1 V^T x0, with V = [e0, e1]
+        S = jnp.eye(2, dtype=Y.dtype) + Y[:2]
+        det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
+        det = jnp.where(det == 0, jnp.finfo(Y.dtype).tiny, det)
+        x = self.lam0[:2]
+        coeff = jnp.stack([S[1, 1] * x[0] - S[0, 1] * x[1], S[0, 0] * x[1] - S[1, 0] * x[0]])
+        lam = jnp.where(self.rows.mask, self.lam0 - Y @ (coeff / det), 0.0)
+        minv_C = self.minv_columns + jnp.einsum("jc,jcrk->rk", H, self.d_minv_columns)
+        u_dot = self.u0_dot + lam @ minv_C
+        rows = eqx.tree_at(
+            lambda r: r.C,
+            self.rows,
+            self.rows.C + jnp.einsum("jc,jcrk->rk", H, self.d_columns),
+        )
+        acc, alpha = u_dot[:3], u_dot[3:]
+        return Solution(acc, alpha, self.geom.R.T @ alpha, lam, rows, self.geom, hats)
+
+
+def sliding_solver(t, state: State, mode: Mode, scene, model, tol, geom) -> SlidingSolver:
+    """The `SlidingSolver` of `mode` at `state` (unit quaternion), `geom` its geometry."""
+    body = scene.body
+    dtype = state.pos.dtype
+    mu = scene.floor.friction
+    blend = tol.slip_blend
+
+    def columns(H):
+        hats = (H[0], H[1], H[2])
+        return mode_rows(state, geom, mode, hats, mu, scene, model, blend=blend).C
+
+    zero = jnp.zeros((3, 3), dtype)
+    rows = mode_rows(state, geom, mode, (zero[0], zero[1], zero[2]), mu, scene, model, blend)
+    # the columns are affine in the directions, so their derivative is exact at any one
+    d_columns = jnp.moveaxis(jax.jacfwd(columns)(zero), (2, 3), (0, 1))  # (3, 3, 6, 6)
+    minv = lambda C: inverse_mass_columns(body, geom.R, C)  # noqa: E731 (linear in C)
+    minv_C = minv(rows.C)
+    d_minv = jax.vmap(jax.vmap(minv))(d_columns)
+    both = rows.mask[:, None] & rows.mask[None, :]
+    A0 = jnp.where(both, rows.J @ minv_C.T, jnp.eye(NUM_ROWS, dtype=dtype))
+    # the rates of A's columns 0 and 1 (the only ones the directions move)
+    d_A = jnp.einsum("ix,jckx->jcik", rows.J, d_minv[:, :, :2])  # (3, 3, 6, 2)
+    d_A = jnp.where(both[None, None, :, :2], d_A, 0.0)
+    acc0, omega_dot0 = accelerations(t, state, scene)
+    u0_dot = jnp.concatenate([acc0, geom.R @ omega_dot0])
+    beta = jnp.asarray(tol.stabilisation, dtype)
+    stab = jnp.where(rows.holonomic, 2 * beta * rows.vel + beta**2 * rows.pos, beta * rows.vel)
+    rhs = jnp.where(rows.mask, -(rows.J @ u0_dot + rows.bias + stab), 0.0)
+    right = jnp.concatenate([rhs[:, None], jnp.moveaxis(d_A, 2, 0).reshape(NUM_ROWS, 18)], 1)
+    X = small_solve(A0, right)  # (6, 19)
+    d_lam = jnp.moveaxis(X[:, 1:].reshape(NUM_ROWS, 3, 3, 2), 0, 2)
+    return SlidingSolver(rows, d_columns, minv_C, d_minv, X[:, 0], d_lam, u0_dot, geom)
 
 
 def no_derivative(tree):

@@ -22,6 +22,7 @@ from ._modes import (
     cross,
     face_twist,
     inverse_mass_columns,
+    sliding_solver,
     solve_mode,
     unit_or,
 )
@@ -166,8 +167,8 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip):
     rest_b = (mode.kind == PAIR) & ~mode.stick[1] & zero_slip[mode.b]
     rest_f = (mode.kind == FACE) & ~mode.stick[0] & (jnp.linalg.norm(twist) <= tol.slip_stop)
 
-    def solve(hats):
-        return solve_mode(t, state, mode, scene, model, tol, hats=hats, geom=geom)
+    # the mode's solution for any sliding directions, at the cost of a 2 x 2 solve each
+    solve = sliding_solver(t, state, mode, scene, model, tol, geom)
 
     # sliding from rest starts opposite to the friction that sticking would need (exactly so
     # at the cone's boundary, where the slip's acceleration vanishes)

@@ -35,6 +35,12 @@ def gap_step_limit(t, y, mode, offsets, scene, model, tol) -> jax.Array:
     # of the computation below is traced at all
     t, y, mode, offsets, scene = no_derivative((t, y, mode, offsets, scene))
     sol = solve_mode(t, unit_state(y), mode, scene, model, tol)
+    return step_limit_of(sol, mode, offsets, model, tol)
+
+
+def step_limit_of(sol, mode, offsets, model, tol) -> jax.Array:
+    """`gap_step_limit` from the mode's solution `sol` at the state (no derivative)."""
+    sol, mode, offsets = no_derivative((sol, mode, offsets))
     geom = sol.geom
     P = model.num_points
     dtype = geom.gap.dtype
@@ -60,7 +66,8 @@ def gap_step_limit(t, y, mode, offsets, scene, model, tol) -> jax.Array:
 
 class GapLimitedSteps(dfx.AbstractStepSizeController):
     """Wraps the user's step-size controller: every step it proposes is cut to
-    `limit(t, y, args)` (s) from the state the step starts at."""
+    `limit(t, y, args)` (s) from the state the step starts at; the first to `args.limit0`,
+    the limit at the start, which the caller has computed already."""
 
     inner: dfx.AbstractStepSizeController
     limit: callable = eqx.field(static=True)
@@ -70,7 +77,7 @@ class GapLimitedSteps(dfx.AbstractStepSizeController):
 
     def init(self, terms, t0, t1, y0, dt0, args, func, error_order):
         t_next, state = self.inner.init(terms, t0, t1, y0, dt0, args, func, error_order)
-        return jnp.minimum(t_next, t0 + self.limit(t0, y0, args)), state
+        return jnp.minimum(t_next, t0 + args.limit0), state
 
     def adapt_step_size(self, t0, t1, y0, y1_candidate, args, y_error, error_order, state):
         keep, next_t0, next_t1, jump, state, result = self.inner.adapt_step_size(

@@ -1,0 +1,60 @@
+"""Process-wide compilation settings that make jaxrb's programs quicker to start.
+
+jaxrb never changes JAX's global configuration by itself; `speed_up_compilation` is for a
+program's entry point (the `jaxrb` command line calls it, and so can a script or notebook):
+
+- JAX's persistent compilation cache: a compiled program is written to a directory and read
+  back by the next process that compiles the same program, instead of compiling it again;
+- on the CPU, XLA's older kernel emitters (`--xla_cpu_use_fusion_emitters=false`): for
+  jaxrb's contact programs (tens of thousands of small operations) they compile in about
+  three quarters of the time and run at least as fast (measured on a 2-core x86 CPU: a
+  die's program 48 s -> 36 s of compile CPU time, its run 238 ms -> 148 ms).
+"""
+
+import os
+import sys
+from pathlib import Path
+
+import jax
+
+CPU_FLAG = "--xla_cpu_use_fusion_emitters=false"
+
+
+def default_cache_dir() -> Path:
+    """The user's cache directory for jaxrb's compiled programs: `$JAXRB_CACHE_DIR` if set,
+    else `$XDG_CACHE_HOME/jaxrb/jax` (default `~/.cache/jaxrb/jax`; on Windows
+    `%LOCALAPPDATA%/jaxrb/jax`; on macOS `~/Library/Caches/jaxrb/jax`)."""
+    if os.environ.get("JAXRB_CACHE_DIR"):
+        return Path(os.environ["JAXRB_CACHE_DIR"]).expanduser()
+    if sys.platform == "win32" and os.environ.get("LOCALAPPDATA"):
+        base = Path(os.environ["LOCALAPPDATA"])
+    elif sys.platform == "darwin":
+        base = Path.home() / "Library" / "Caches"
+    else:
+        base = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return base / "jaxrb" / "jax"
+
+
+def _backend_started() -> bool:
+    from jax._src import xla_bridge
+
+    return bool(xla_bridge._backends)
+
+
+def speed_up_compilation(cache: bool = True, cache_dir=None) -> Path | None:
+    """Turn on the persistent compilation cache (if `cache`) in `cache_dir` (default
+    `default_cache_dir()`), and, if JAX has not started its CPU backend yet and `XLA_FLAGS`
+    does not choose otherwise, the quicker CPU kernel emitters. Changes process-wide
+    settings: call it once at the start of a program. Returns the cache directory (None
+    without a cache)."""
+    flags = os.environ.get("XLA_FLAGS", "")
+    if "xla_cpu_use_fusion_emitters" not in flags and not _backend_started():
+        os.environ["XLA_FLAGS"] = f"{flags} {CPU_FLAG}".strip()
+    if not cache:
+        return None
+    directory = Path(cache_dir).expanduser() if cache_dir is not None else default_cache_dir()
+    directory.mkdir(parents=True, exist_ok=True)
+    jax.config.update("jax_compilation_cache_dir", str(directory))
+    # programs quicker to compile than this are not worth a file
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    return directory
