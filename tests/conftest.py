@@ -1,8 +1,23 @@
+import os
+from pathlib import Path
+
 import jax
 import pytest
 
+import jaxrb
+
+# Compiled programs go to the repository's .cache/ (never the user's cache): the workers
+# share them, so a program two test modules use is compiled once per run, and a second run
+# of the suite reads them back. The command line (called in-process and in subprocesses by
+# the tests) and the notebooks' kernels find the same directory through the environment.
+_CACHE = Path(__file__).resolve().parent.parent / ".cache" / "jax-tests"
+os.environ["JAXRB_CACHE_DIR"] = str(_CACHE)
+os.environ["JAX_COMPILATION_CACHE_DIR"] = str(_CACHE)
+os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0.5"
+
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "strict")
+jaxrb.speed_up_compilation(cache_dir=_CACHE)  # also the quicker CPU kernel emitters
 
 
 @pytest.fixture(autouse=True, scope="module")

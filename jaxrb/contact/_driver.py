@@ -36,18 +36,34 @@ from ._step_limit import gap_step_limit, limited, step_limit_of
 from ._transition import at_event
 
 
-class _Segment(eqx.Module):
-    """The arguments of a segment's right-hand side, event function and step limit:
-    its mode, the shifts of its conditions, and the step limit at its start (s)."""
-
-    mode: object
-    offsets: jax.Array
-    limit0: jax.Array
-
-
 def _sliding(mode):
     held_still = mode.stick[0] & ((mode.kind != PAIR) | mode.stick[1])
     return (mode.kind != FLIGHT) & ~held_still
+
+
+def check_contact_scene(scene, options) -> None:
+    """Raise for a scene the contact engine does not model, or options of the wrong type."""
+    if scene.body.shape is None:
+        raise ValueError(
+            "a scene with a floor needs a body shape (Sphere, Box or Cylinder) for contact"
+        )
+    contact_model(scene.body.shape)  # raises for a shape with no contact model
+    resists = [scene.floor.rolling_resistance, scene.floor.spin_resistance]
+    if not isinstance(scene.body.shape, Sphere) and any(
+        is_concrete(x) and float(x) != 0.0 for x in resists
+    ):
+        raise ValueError(
+            "rolling and spin resistance act on a ball (Sphere) only; the body is a "
+            f"{type(scene.body.shape).__name__}: leave the floor's rolling_resistance and "
+            "spin_resistance at 0"
+        )
+    if scene.floor.curved and not isinstance(scene.body.shape, Sphere):
+        raise ValueError(
+            f"a {type(scene.floor).__name__} meets only a Sphere (the body is a "
+            f"{type(scene.body.shape).__name__}); any shape meets a Floor"
+        )
+    if not isinstance(options, ContactOptions):
+        raise TypeError(f"options must be a ContactOptions, got {type(options).__name__}")
 
 
 def simulate_contact(
@@ -67,28 +83,7 @@ def simulate_contact(
     """`jaxrb.simulate` for a scene with a floor (it resolves the solver, controller and
     adjoint defaults). `options` is a `ContactOptions`; `settings_ok` whether the solver
     settings are valid."""
-    if scene.body.shape is None:
-        raise ValueError(
-            "a scene with a floor needs a body shape (Sphere, Box or Cylinder) for contact"
-        )
-    model = contact_model(scene.body.shape)  # raises for a shape with no contact model
-    del model
-    resists = [scene.floor.rolling_resistance, scene.floor.spin_resistance]
-    if not isinstance(scene.body.shape, Sphere) and any(
-        is_concrete(x) and float(x) != 0.0 for x in resists
-    ):
-        raise ValueError(
-            "rolling and spin resistance act on a ball (Sphere) only; the body is a "
-            f"{type(scene.body.shape).__name__}: leave the floor's rolling_resistance and "
-            "spin_resistance at 0"
-        )
-    if scene.floor.curved and not isinstance(scene.body.shape, Sphere):
-        raise ValueError(
-            f"a {type(scene.floor).__name__} meets only a Sphere (the body is a "
-            f"{type(scene.body.shape).__name__}); any shape meets a Floor"
-        )
-    if not isinstance(options, ContactOptions):
-        raise TypeError(f"options must be a ContactOptions, got {type(options).__name__}")
+    check_contact_scene(scene, options)
     ts = jnp.asarray(ts)
     state0 = jax.tree.map(lambda x: jnp.asarray(x, ts.dtype), state0)
     tol = options.resolved(ts.dtype)
@@ -120,91 +115,99 @@ def simulate_contact(
     )
 
 
-@eqx.filter_jit
-def _simulate_contact(
-    scene,
-    state0,
-    ts,
-    solver,
-    stepsize_controller,
-    adjoint,
-    dt0,
-    max_steps,
-    throw,
-    options,
-    tol,
-    loop_kind,
-    settings_ok,
-):
-    dtype = ts.dtype
-    model = contact_model(scene.body.shape)
-    result = input_result(scene, state0, ts, settings_ok)
-    if not isinstance(scene.body.shape, Sphere):  # traced resistances: checked here
-        resists = (scene.floor.rolling_resistance != 0) | (scene.floor.spin_resistance != 0)
+class _Segment(eqx.Module):
+    """The arguments of a segment's right-hand side, event function and step limit: the
+    scene, the segment's mode, the shifts of its conditions, and the step limit at its
+    start (s)."""
+
+    scene: object
+    mode: object
+    offsets: jax.Array
+    limit0: jax.Array
+
+
+class ContactProgram(eqx.Module):
+    """What every body of a contact simulation shares: the shape's contact model, the
+    solver settings, the contact options and tolerances. `start`, `advance` and
+    `trajectory` are the pieces of a simulation (the loop of `simulate` runs them for one
+    body, the lanes of `simulate_throws` for many); the scene is an argument of each, so
+    that every body may have its own parameters."""
+
+    model: object
+    solver: object
+    controller: object
+    adjoint: object
+    dt0: object
+    max_steps: int = eqx.field(static=True)
+    options: ContactOptions = eqx.field(static=True)
+    tol: object = eqx.field(static=True)
+    settings_ok: object
+
+    def values(self, t, y, mode, scene):
+        """The condition vector of `mode` at `y` (docs/contact.md, section 4)."""
+        sol = solve_mode(t, unit_state(y), mode, scene, self.model, self.tol)
+        return conditions(sol, mode, self.model, scene, self.tol)
+
+    def start(self, scene, state0, ts) -> dict:
+        """The carry of a simulation of `scene` from `state0`, saved at `ts`, before its
+        first pass (which applies the maps of the start: a body may start touching)."""
+        options, tol = self.options, self.tol
+        dtype = ts.dtype
+        result = input_result(scene, state0, ts, self.settings_ok)
+        if not isinstance(scene.body.shape, Sphere):  # traced resistances: checked here
+            floor = scene.floor
+            resists = (floor.rolling_resistance != 0) | (floor.spin_resistance != 0)
+            result = RESULTS.where(
+                (result == RESULTS.successful) & resists, RESULTS.invalid_resistance, result
+            )
+        ts = safe_times(ts, result == RESULTS.successful)
+        T = ts.shape[0]
+        y0 = unit_state(state0)
+        d0 = scene.floor.body_distance(scene.body.shape, y0.pos, y0.quat)
         result = RESULTS.where(
-            (result == RESULTS.successful) & resists, RESULTS.invalid_resistance, result
+            (result == RESULTS.successful) & (d0 < -tol.contact),
+            RESULTS.starts_below_floor,
+            result,
         )
-    user_ts, ts = ts, safe_times(ts, result == RESULTS.successful)
-    t_end = ts[-1]
-    T = ts.shape[0]
-    y0 = unit_state(state0)
-    d0 = scene.floor.body_distance(scene.body.shape, y0.pos, y0.quat)
-    result = RESULTS.where(
-        (result == RESULTS.successful) & (d0 < -tol.contact), RESULTS.starts_below_floor, result
-    )
-    cond_tol = condition_tolerances(model, tol, dtype)
+        log0 = dict(
+            events=jnp.array(0, jnp.int32),
+            zeno_merges=jnp.array(0, jnp.int32),
+            energy_guards=jnp.array(0, jnp.int32),
+            inconsistent=jnp.array(0, jnp.int32),
+            ambiguous=jnp.array(0, jnp.int32),
+            max_energy_rise=jnp.zeros((), dtype),
+            max_penetration=jnp.zeros((), dtype),
+            event_time=jnp.full(options.max_events + 1, jnp.inf, dtype),
+            event_cause=jnp.zeros(options.max_events + 1, jnp.int32),
+            event_kind=jnp.zeros(options.max_events + 1, jnp.int32),
+            event_sliding=jnp.zeros(options.max_events + 1, bool),
+        )
+        return dict(
+            ts=ts,
+            t=ts[0],
+            y=y0,
+            mode=flight_mode(dtype),
+            trigger=jnp.array(-1),
+            done=result != RESULTS.successful,
+            impacts=empty_impacts(options.max_impacts, dtype),
+            log=log0,
+            buffer=jax.tree.map(lambda x: jnp.zeros((T,) + x.shape, dtype), y0),
+            kind=jnp.zeros(T, jnp.int32),
+            sliding=jnp.zeros(T, bool),
+            filled=jnp.zeros(T, bool),
+            result=result,
+            num_steps=jnp.array(0),
+            passes=jnp.array(0, jnp.int32),
+        )
 
-    def values(t, y, mode):
-        sol = solve_mode(t, unit_state(y), mode, scene, model, tol)
-        return conditions(sol, mode, model, scene, tol)
-
-    term = dfx.ODETerm(lambda t, y, args: mode_rates(t, y, args.mode, scene, model, tol))
-    event = dfx.Event(
-        # in JAX's default float dtype: diffrax compares it with a Python float internally
-        lambda t, y, args, **kw: jnp.min(values(t, y, args.mode) + args.offsets).astype(
-            jnp.result_type(float)
-        ),
-        root_finder=TimeBisection(
-            rtol=tol.event, atol=tol.event, flip="detect", expand_if_necessary=True
-        ),
-        direction=False,
-    )
-    controller = limited(
-        stepsize_controller,
-        lambda t, y, args: gap_step_limit(t, y, args.mode, args.offsets, scene, model, tol),
-    )
-    log0 = dict(
-        events=jnp.array(0, jnp.int32),
-        zeno_merges=jnp.array(0, jnp.int32),
-        energy_guards=jnp.array(0, jnp.int32),
-        inconsistent=jnp.array(0, jnp.int32),
-        ambiguous=jnp.array(0, jnp.int32),
-        max_energy_rise=jnp.zeros((), dtype),
-        max_penetration=jnp.zeros((), dtype),
-        event_time=jnp.full(options.max_events + 1, jnp.inf, dtype),
-        event_cause=jnp.zeros(options.max_events + 1, jnp.int32),
-        event_kind=jnp.zeros(options.max_events + 1, jnp.int32),
-        event_sliding=jnp.zeros(options.max_events + 1, bool),
-    )
-    # each pass of the loop: the maps of the event that ended the previous segment (at the
-    # first pass, of the start: a body may start touching the floor), then one segment
-    carry0 = dict(
-        t=ts[0],
-        y=y0,
-        mode=flight_mode(dtype),
-        trigger=jnp.array(-1),
-        done=result != RESULTS.successful,
-        impacts=empty_impacts(options.max_impacts, dtype),
-        log=log0,
-        buffer=jax.tree.map(lambda x: jnp.zeros((T,) + x.shape, dtype), y0),
-        kind=jnp.zeros(T, jnp.int32),
-        sliding=jnp.zeros(T, bool),
-        filled=jnp.zeros(T, bool),
-        result=result,
-        num_steps=jnp.array(0),
-    )
-
-    def segment(carry):
+    def advance(self, scene, carry) -> dict:
+        """One pass: the maps of the event that ended the previous segment (at the first
+        pass, of the start), then one smooth segment up to the next event or the end."""
+        model, options, tol = self.model, self.options, self.tol
+        ts = carry["ts"]
+        T = ts.shape[0]
+        t_end = ts[-1]
+        cond_tol = condition_tolerances(model, tol, ts.dtype)
         done = carry["done"]
         t0 = jnp.where(done, t_end, carry["t"])
         out = at_event(t0, carry["y"], carry["mode"], carry["trigger"], scene, model, tol)
@@ -257,20 +260,20 @@ def _simulate_contact(
         done = done | too_many | paradox
         t0 = jnp.where(done, t_end, t0)
         sol = dfx.diffeqsolve(
-            term,
-            solver,
+            dfx.ODETerm(lambda t, y, args: mode_rates(t, y, args.mode, args.scene, model, tol)),
+            self.solver,
             t0=t0,
             t1=t_end,
-            dt0=dt0,
+            dt0=self.dt0,
             y0=y,
-            args=_Segment(mode, offsets, limit0),
+            args=_Segment(scene, mode, offsets, limit0),
             saveat=dfx.SaveAt(
                 subs=[dfx.SubSaveAt(ts=jnp.clip(ts, t0, t_end)), dfx.SubSaveAt(t1=True)]
             ),
-            stepsize_controller=controller,
-            adjoint=adjoint,
-            max_steps=max_steps,
-            event=event,
+            stepsize_controller=self.controller,
+            adjoint=self.adjoint,
+            max_steps=self.max_steps,
+            event=_event(model, tol),
             throw=False,
         )
         t_stop = sol.ts[1][0]
@@ -284,7 +287,7 @@ def _simulate_contact(
         def keep(buf, new):
             return jnp.where(owned.reshape((T,) + (1,) * (buf.ndim - 1)), new, buf)
 
-        trigger = jnp.argmin(values(t_stop, y_stop, mode) + offsets)
+        trigger = jnp.argmin(self.values(t_stop, y_stop, mode, scene) + offsets)
         log["events"] = log["events"] + ev.astype(jnp.int32)
         result = carry["result"]
         result = RESULTS.where(failed & (result == RESULTS.successful), res, result)
@@ -296,6 +299,7 @@ def _simulate_contact(
         )
         moved = ~done & ~failed
         return dict(
+            ts=ts,
             t=jnp.where(moved, t_stop, carry["t"]),
             y=jax.tree.map(lambda a, b: jnp.where(moved, a, b), y_stop, y),
             mode=mode,
@@ -309,42 +313,97 @@ def _simulate_contact(
             filled=filled | owned,
             result=result,
             num_steps=carry["num_steps"] + jnp.where(done, 0, sol.stats["num_accepted_steps"]),
+            passes=carry["passes"] + (~carry["done"]).astype(jnp.int32),
         )
 
+    def trajectory(self, carry, user_ts) -> Trajectory:
+        """The `Trajectory` of a finished carry, saved at `user_ts`."""
+        T = user_ts.shape[0]
+        result = carry["result"]
+        result = RESULTS.where(
+            ~carry["done"] & (result == RESULTS.successful), RESULTS.max_events_reached, result
+        )
+        filled = carry["filled"]
+        raw = jax.tree.map(
+            lambda b, end: jnp.where(filled.reshape((T,) + (1,) * (b.ndim - 1)), b, end[None]),
+            carry["buffer"],
+            carry["y"],
+        )
+        drift = jnp.max(jnp.where(filled, jnp.abs(jnp.linalg.norm(raw.quat, axis=-1) - 1), 0.0))
+        states = State(raw.pos, quat_normalize(raw.quat), raw.vel, raw.omega)
+        log = ContactLog(
+            kind=jnp.where(filled, carry["kind"], carry["mode"].kind),
+            sliding=jnp.where(filled, carry["sliding"], _sliding(carry["mode"])),
+            **carry["log"],
+        )
+        return Trajectory(
+            ts=user_ts,
+            states=states,
+            result=result,
+            quat_norm_drift=drift,
+            num_steps=carry["num_steps"],
+            impacts=carry["impacts"],
+            contact=log,
+        )
+
+
+def _event(model, tol):
+    """A segment's event: the first zero of the minimum of its mode's conditions (shifted
+    by the offsets at its start)."""
+
+    def condition(t, y, args, **kwargs):
+        sol = solve_mode(t, unit_state(y), args.mode, args.scene, model, tol)
+        values = conditions(sol, args.mode, model, args.scene, tol) + args.offsets
+        # in JAX's default float dtype: diffrax compares it with a Python float internally
+        return jnp.min(values).astype(jnp.result_type(float))
+
+    root_finder = TimeBisection(
+        rtol=tol.event, atol=tol.event, flip="detect", expand_if_necessary=True
+    )
+    return dfx.Event(condition, root_finder=root_finder, direction=False)
+
+
+def contact_program(
+    scene, solver, stepsize_controller, adjoint, dt0, max_steps, options, tol, settings_ok
+) -> ContactProgram:
+    """The `ContactProgram` of `scene`'s shape with these solver settings."""
+    model = contact_model(scene.body.shape)
+    controller = limited(
+        stepsize_controller,
+        lambda t, y, args: gap_step_limit(t, y, args.mode, args.offsets, args.scene, model, tol),
+    )
+    return ContactProgram(
+        model, solver, controller, adjoint, dt0, max_steps, options, tol, settings_ok
+    )
+
+
+@eqx.filter_jit
+def _simulate_contact(
+    scene,
+    state0,
+    ts,
+    solver,
+    stepsize_controller,
+    adjoint,
+    dt0,
+    max_steps,
+    throw,
+    options,
+    tol,
+    loop_kind,
+    settings_ok,
+):
+    program = contact_program(
+        scene, solver, stepsize_controller, adjoint, dt0, max_steps, options, tol, settings_ok
+    )
     carry = eqxi.while_loop(
         lambda c: ~jnp.all(c["done"]),
-        segment,
-        carry0,
+        lambda c: program.advance(scene, c),
+        program.start(scene, state0, ts),
         max_steps=options.max_events + 1,  # the start, then one pass per event
         kind=loop_kind,
     )
-    result = carry["result"]
-    result = RESULTS.where(
-        ~carry["done"] & (result == RESULTS.successful), RESULTS.max_events_reached, result
-    )
-    filled = carry["filled"]
-    last = carry["y"]
-    raw = jax.tree.map(
-        lambda b, end: jnp.where(filled.reshape((T,) + (1,) * (b.ndim - 1)), b, end[None]),
-        carry["buffer"],
-        last,
-    )
-    drift = jnp.max(jnp.where(filled, jnp.abs(jnp.linalg.norm(raw.quat, axis=-1) - 1), 0.0))
-    states = State(raw.pos, quat_normalize(raw.quat), raw.vel, raw.omega)
-    log = ContactLog(
-        kind=jnp.where(filled, carry["kind"], carry["mode"].kind),
-        sliding=jnp.where(filled, carry["sliding"], _sliding(carry["mode"])),
-        **carry["log"],
-    )
-    traj = Trajectory(
-        ts=user_ts,
-        states=states,
-        result=result,
-        quat_norm_drift=drift,
-        num_steps=carry["num_steps"],
-        impacts=carry["impacts"],
-        contact=log,
-    )
+    traj = program.trajectory(carry, ts)
     if throw:
-        traj = result.error_if(traj, result != RESULTS.successful)
+        traj = traj.result.error_if(traj, traj.result != RESULTS.successful)
     return traj

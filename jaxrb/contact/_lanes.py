@@ -1,0 +1,205 @@
+"""Many throws of a scene with a floor, in lanes that are refilled as throws finish.
+
+`jax.vmap(jaxrb.simulate)` runs a batch of bodies in lockstep: every pass of its segment loop
+applies one event map and integrates one smooth segment for every member, and the loop runs
+until the member with the most events is done, so a batch of dice costs as much as its
+longest throw times the batch size. `simulate_throws` runs N throws in L lanes (L <= N): a
+lane whose throw has finished writes its trajectory and takes the next throw not yet
+started, so that every lane keeps working until the throws run out, and a throw with few
+events costs few passes. Each lane runs exactly the passes of `jaxrb.simulate` (the same
+`ContactProgram`), so every throw's trajectory is the one `simulate` gives, to roundoff.
+"""
+
+import diffrax as dfx
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._checks import all_met, as_float_array
+from .._inputs import check_solver_settings
+from .._state import State
+from ._driver import check_contact_scene, contact_program
+from ._options import ContactOptions
+
+DEFAULT_LANES = 64
+
+
+def simulate_throws(
+    scene,
+    states0: State,
+    ts,
+    *,
+    lanes: int | None = None,
+    batched_scene: bool = False,
+    solver: dfx.AbstractSolver | None = None,
+    rtol: float = 1e-8,
+    atol: float = 1e-8,
+    dt0: float | None = None,
+    max_steps: int = 100_000,
+    stepsize_controller: dfx.AbstractStepSizeController | None = None,
+    max_impacts: int | None = None,
+    rest_speed: float | None = None,
+    contact: ContactOptions | None = None,
+):
+    """Simulate N throws of `scene` (a scene with a floor) from `states0`, saved at `ts`,
+    in `lanes` lanes refilled as throws finish (module docstring).
+
+    **Arguments:**
+
+    - `scene`: a `Scene` with a floor; with `batched_scene=True` every array leaf of it has
+      a leading axis N (one scene per throw: e.g. a restitution per throw), else it is
+      shared.
+    - `states0`: a `State` whose leaves have a leading axis N (quaternions of any non-zero
+      norm).
+    - `ts`: increasing save times (s), shape (T,), shared by every throw.
+    - `lanes`: how many throws run at once (default `min(N, 64)`); more lanes use the
+      hardware better (wider vector operations, a GPU's threads), fewer waste less work on
+      lanes left idle at the end.
+    - `solver`, `rtol`, `atol`, `dt0`, `max_steps`, `stepsize_controller`, `max_impacts`,
+      `rest_speed`, `contact`: as in `jaxrb.simulate`.
+
+    **Returns:** a `Trajectory` whose leaves have a leading axis N, as `jax.vmap(simulate)`
+    gives with `throw=False`: a throw with bad input or a failed solve is flagged in its
+    `result`, and the others are computed.
+
+    Not differentiable (the lanes' bookkeeping is a plain loop): for gradients, use
+    `jax.vmap(jaxrb.simulate)`.
+    """
+    if scene.floor is None:
+        raise ValueError("simulate_throws needs a scene with a floor; use jaxrb.simulate")
+    ts = jnp.asarray(ts)
+    if ts.ndim != 1 or ts.shape[0] < 1:
+        raise ValueError(f"ts must be a 1-D array of save times, got shape {ts.shape}")
+    if not jnp.issubdtype(ts.dtype, jnp.floating):
+        ts = ts.astype(float)
+    if not isinstance(states0, State):
+        raise TypeError(f"states0 must be a jaxrb.State, got {type(states0).__name__}")
+    for name, k in (("pos", 3), ("quat", 4), ("vel", 3), ("omega", 3)):
+        x = as_float_array(getattr(states0, name), f"states0.{name}", (k,))
+        if x.ndim != 2:
+            raise ValueError(f"states0.{name} must have shape (N, {k}), got {x.shape}")
+    n = states0.pos.shape[0]
+    if n < 1:
+        raise ValueError("states0 holds no throw (N = 0)")
+    if batched_scene:
+        for leaf in jax.tree.leaves(eqx.filter(scene, eqx.is_array)):
+            if leaf.ndim < 1 or leaf.shape[0] != n:
+                raise ValueError(
+                    f"with batched_scene=True every array of the scene needs a leading axis "
+                    f"of N = {n}, found one of shape {leaf.shape}"
+                )
+    lanes = min(n, DEFAULT_LANES) if lanes is None else int(lanes)
+    if lanes < 1:
+        raise ValueError(f"lanes must be >= 1, got {lanes}")
+    lanes = min(lanes, n)
+    if contact is None:
+        shortcuts = dict(max_impacts=max_impacts, rest_speed=rest_speed)
+        contact = ContactOptions(**{k: v for k, v in shortcuts.items() if v is not None})
+    elif max_impacts is not None or rest_speed is not None:
+        raise ValueError("give max_impacts and rest_speed inside `contact`, not beside it")
+    one_scene = jax.tree.map(lambda x: x[0], scene) if batched_scene else scene
+    check_contact_scene(one_scene, contact)
+    settings_ok = all_met(
+        check_solver_settings(
+            rtol if stepsize_controller is None else 1.0,
+            atol if stepsize_controller is None else 1.0,
+            dt0,
+            max_steps,
+            False,
+        )
+    )
+    if solver is None:
+        solver = dfx.Tsit5()
+    if stepsize_controller is None:
+        stepsize_controller = dfx.PIDController(rtol=jnp.asarray(rtol), atol=jnp.asarray(atol))
+    if dt0 is not None:
+        dt0 = jnp.asarray(dt0, ts.dtype)
+    states0 = jax.tree.map(lambda x: jnp.asarray(x, ts.dtype), states0)
+    return _throws(
+        scene,
+        states0,
+        ts,
+        solver,
+        stepsize_controller,
+        dt0,
+        max_steps,
+        contact,
+        contact.resolved(ts.dtype),
+        settings_ok,
+        lanes,
+        batched_scene,
+    )
+
+
+@eqx.filter_jit
+def _throws(
+    scene,
+    states0,
+    ts,
+    solver,
+    stepsize_controller,
+    dt0,
+    max_steps,
+    options,
+    tol,
+    settings_ok,
+    lanes,
+    batched_scene,
+):
+    n = states0.pos.shape[0]
+    adjoint = dfx.RecursiveCheckpointAdjoint()
+
+    def scene_of(i):
+        return jax.tree.map(lambda x: x[i], scene) if batched_scene else scene
+
+    def program_of(s):
+        return contact_program(
+            s, solver, stepsize_controller, adjoint, dt0, max_steps, options, tol, settings_ok
+        )
+
+    def start(i):
+        s = scene_of(i)
+        return program_of(s).start(s, jax.tree.map(lambda x: x[i], states0), ts)
+
+    def advance(i, carry):
+        s = scene_of(i)
+        return program_of(s).advance(s, carry)
+
+    def trajectory(i, carry):
+        return program_of(scene_of(i)).trajectory(carry, ts)
+
+    first = jnp.arange(lanes)
+    carries = jax.vmap(start)(first)
+    # the trajectories of all N throws, filled as they finish
+    shapes = jax.eval_shape(jax.vmap(trajectory), first, carries)
+    out0 = jax.tree.map(lambda s: jnp.zeros((n,) + s.shape[1:], s.dtype), shapes)
+    passes_allowed = options.max_events + 1  # the start, then one pass per event
+
+    def running(loop):
+        throw_of_lane = loop[1]
+        return jnp.any(throw_of_lane < n)
+
+    def step(loop):
+        carries, throw_of_lane, next_throw, out = loop
+        idle = throw_of_lane >= n
+        index = jnp.minimum(throw_of_lane, n - 1)
+        carries = jax.vmap(advance)(index, carries)
+        finished = ~idle & (carries["done"] | (carries["passes"] >= passes_allowed))
+        # write the finished throws' trajectories (the other lanes' rows are dropped)
+        rows = jnp.where(finished, throw_of_lane, n)
+        trajs = jax.vmap(trajectory)(index, carries)
+        out = jax.tree.map(lambda o, t: o.at[rows].set(t, mode="drop"), out, trajs)
+        # refill the finished lanes with the next throws
+        new = next_throw + jnp.cumsum(finished) - 1
+        refill = finished & (new < n)
+        fresh = jax.vmap(start)(jnp.where(refill, new, 0))
+        carries = jax.tree.map(
+            lambda f, c: jnp.where(refill.reshape((-1,) + (1,) * (c.ndim - 1)), f, c),
+            fresh,
+            carries,
+        )
+        throw_of_lane = jnp.where(finished, jnp.where(refill, new, n), throw_of_lane)
+        return carries, throw_of_lane, next_throw + jnp.sum(finished), out
+
+    loop = (carries, first, jnp.asarray(lanes), out0)
+    return jax.lax.while_loop(running, step, loop)[3]
