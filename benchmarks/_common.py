@@ -54,17 +54,18 @@ def device_name() -> str:
 
 
 def lean_variants(scene, n_bodies):
-    """(label, devices) for `simulate_batch`: all devices, and one device when there are more;
-    the label marks the one `simulate_batch` picks by default for this scene."""
+    """(label, devices) for `simulate_batch` (the batch as one diffrax Dopri8 solve per
+    device): all devices, and one device when there are more; the label marks the one
+    `simulate_batch` picks by default for this scene."""
     from jaxrb._batched import _default_devices
 
     devs = jax.devices()
     if len(devs) == 1:
-        return [("jaxrb lean DOP853 (simulate_batch)", devs)]
+        return [("jaxrb simulate_batch, Dopri8", devs)]
     default = len(_default_devices(scene, n_bodies))
     return [
         (
-            f"jaxrb lean DOP853 (simulate_batch), {k} device{'s' if k > 1 else ''}"
+            f"jaxrb simulate_batch, Dopri8, {k} device{'s' if k > 1 else ''}"
             + (" (default)" if k == default else ""),
             devs[:k],
         )
@@ -73,9 +74,10 @@ def lean_variants(scene, n_bodies):
 
 
 def lean_rows(problem, scene, states0, ts, tols, dname, error_of):
-    """Rows of `simulate_batch` over the tolerances `tols`, one sweep per `lean_variants`
-    (the tolerance is a traced argument: one compilation per sweep). `error_of(trajectory)`
-    gives the row's error."""
+    """Rows of `simulate_batch` (diffrax Dopri8, the batch as one solve per device) over the
+    tolerances `tols`, one sweep per `lean_variants` (the tolerance is a traced argument: one
+    compilation per sweep). `error_of(trajectory)` gives the row's error."""
+    import diffrax as dfx
     import jax.numpy as jnp
 
     from jaxrb._batched import simulate_batch
@@ -85,7 +87,7 @@ def lean_rows(problem, scene, states0, ts, tols, dname, error_of):
     for label, devs in lean_variants(scene, n):
         lean = jax.jit(
             lambda s, tol: simulate_batch(
-                scene, s, ts, rtol=tol, atol=tol, throw=False, devices=devs
+                scene, s, ts, rtol=tol, atol=tol, solver=dfx.Dopri8(), throw=False, devices=devs
             )
         )
         for tol in tols:

@@ -7,6 +7,14 @@ exact omega from `jaxrb.analytic.asymmetric_top` (Jacobi elliptic functions), re
 from `jaxrb.simulate` with diffrax Dopri8 at rtol = atol = 1e-13 in float64 (cross-checked
 against the exact flow `jaxrb.torque_free_flow` when present).
 
+Methods: `jaxrb.simulate` with a batched state (the batch as one diffrax solve with
+batch-wide step control, one device), with its reverse-mode gradient over all N bodies and a
+forward-mode derivative; `simulate_batch` (the same solve, split over devices);
+`jax.vmap(jaxrb.simulate)` (each body its own solve), also with default settings; plain
+diffrax on a hand-written 7-number right-hand side (quaternion + body omega), vmapped and as
+one batched solve, with the same solvers and tolerances; a fixed-step jnp RK4; the exact
+flow; scipy and MuJoCo.
+
 Run: python -m benchmarks.b1_torque_free --n 1000 --dtype both --out bench_out
 """
 
@@ -23,7 +31,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxrb  # noqa: E402
-from jaxrb._batched import simulate_batch  # noqa: E402
+from jaxrb._batched import batch_rms_norm, simulate_batch  # noqa: E402
 from jaxrb.analytic import asymmetric_top  # noqa: E402
 
 try:
@@ -115,7 +123,7 @@ def run(n=1000, dtypes=("float64", "float32"), n_python=10, quick=False, scaling
         scene = scene_for(dt)
         states0 = jaxrb.make_state(omega=omega0.astype(dt))
         ts = ts64.astype(dt)
-        # lean batched DOP853
+        # simulate_batch: the batch as one diffrax Dopri8 solve per device
         tols = [1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11] if dname == "float64" else [1e-4, 1e-5, 1e-6]
         if quick:
             tols = tols[1::2]
@@ -128,11 +136,15 @@ def run(n=1000, dtypes=("float64", "float32"), n_python=10, quick=False, scaling
             dname,
             lambda tr: error(tr.states.omega[:, -1], tr.states.quat[:, -1]),
         )
-        # plain vmap of diffrax Dopri8 / Tsit5 through jaxrb.simulate
+        # jaxrb.simulate with a batched state (one solve, one device), its gradients
+        rows += batched_rows(scene, states0, ts, dname, error, quick)
+        # vmap of diffrax Dopri8 / Tsit5 through jaxrb.simulate, and plain diffrax beside it
+        vmap_tols = (
+            [1e-7, 1e-8, 1e-9, 5e-10, 3e-10, 1e-10, 1e-11] if dname == "float64" else [1e-5, 1e-6]
+        )
+        if quick:
+            vmap_tols = vmap_tols[1::2]
         for solver_name, solver in (("Dopri8", dfx.Dopri8()), ("Tsit5", dfx.Tsit5())):
-            tols = [1e-7, 1e-8, 1e-9, 1e-10] if dname == "float64" else [1e-5, 1e-6]
-            if quick:
-                tols = tols[1::2]
             fn = jax.jit(
                 jax.vmap(
                     lambda s, tol, solver=solver: jaxrb.simulate(
@@ -141,7 +153,7 @@ def run(n=1000, dtypes=("float64", "float32"), n_python=10, quick=False, scaling
                     in_axes=(0, None),
                 )
             )
-            for tol in tols:
+            for tol in vmap_tols:
                 first, best, tr = C.time_jax(fn, states0, jnp.asarray(tol, dt))
                 rows.append(
                     C.Row(
@@ -149,6 +161,32 @@ def run(n=1000, dtypes=("float64", "float32"), n_python=10, quick=False, scaling
                         f"diffrax {solver_name}, vmap(jaxrb.simulate)",
                         dname,
                         f"tol {tol:.0e}",
+                        n,
+                        error(tr.states.omega[:, -1], tr.states.quat[:, -1]),
+                        best / n * 1e6,
+                        first - best,
+                        float(jnp.mean(tr.num_steps)),
+                    )
+                )
+            rows += plain_rows(solver_name, solver, omega0.astype(dt), ts, vmap_tols, dname, error)
+        if dname == "float64":  # the default rtol (1e-8) is for float64
+            for label, fn in (
+                (
+                    "vmap(jaxrb.simulate), default settings (Tsit5, tol 1e-8)",
+                    jax.jit(jax.vmap(lambda s: jaxrb.simulate(scene, s, ts))),
+                ),
+                (
+                    "jaxrb.simulate, batched state, default settings (Dopri8, tol 1e-8)",
+                    jax.jit(lambda s: jaxrb.simulate(scene, s, ts)),
+                ),
+            ):
+                first, best, tr = C.time_jax(fn, states0)
+                rows.append(
+                    C.Row(
+                        "B1",
+                        label,
+                        dname,
+                        "default",
                         n,
                         error(tr.states.omega[:, -1], tr.states.quat[:, -1]),
                         best / n * 1e6,
@@ -205,6 +243,207 @@ def run(n=1000, dtypes=("float64", "float32"), n_python=10, quick=False, scaling
     rows += mujoco_rows(omega0, error, quick)
     scale_pts = scaling_points(quick) if scaling else []
     return rows, scale_pts
+
+
+GRAD_TOL = 5e-10  # the batched Dopri8's cheapest tolerance with error <= 1e-8 here
+
+
+def _observable(weights, traj):
+    """A weighted sum of every body's final attitude and angular velocity."""
+    return jnp.sum(weights[:, :4] * traj.states.quat[:, -1]) + jnp.sum(
+        weights[:, 4:] * traj.states.omega[:, -1]
+    )
+
+
+def batched_rows(scene, states0, ts, dname, error, quick):
+    """`jaxrb.simulate` on the batched state (one diffrax solve, batch-wide step control) over
+    tolerances with Dopri8 and Tsit5; in float64 also the reverse-mode gradient of a weighted
+    sum of all final states w.r.t. all N initial omegas (`jax.grad`, diffrax's default
+    RecursiveCheckpointAdjoint), a forward-mode directional derivative (`jax.jvp`,
+    `diffrax.ForwardMode()`) and, for comparison, the reverse gradient through
+    `vmap(jaxrb.simulate)`, all at `GRAD_TOL` with Dopri8."""
+    n = states0.omega.shape[0]
+    dt = ts.dtype
+    rows = []
+    if dname == "float64":
+        sweeps = (
+            ("Dopri8", dfx.Dopri8(), [1e-7, 1e-8, 1e-9, 5e-10, 3e-10, 1e-10, 1e-11]),
+            ("Tsit5", dfx.Tsit5(), [1e-6, 1e-7, 1e-8, 1e-9, 1e-10]),
+        )
+    else:
+        sweeps = (
+            ("Dopri8", dfx.Dopri8(), [1e-5, 1e-6]),
+            ("Tsit5", dfx.Tsit5(), [1e-4, 1e-5, 1e-6]),
+        )
+    for name, solver, tols in sweeps:
+        fn = jax.jit(
+            lambda s, tol, solver=solver: jaxrb.simulate(
+                scene, s, ts, solver=solver, rtol=tol, atol=tol, throw=False
+            )
+        )
+        for tol in tols[1::2] if quick else tols:
+            first, best, tr = C.time_jax(fn, states0, jnp.asarray(tol, dt))
+            rows.append(
+                C.Row(
+                    "B1",
+                    f"jaxrb.simulate, batched state (one solve), {name}",
+                    dname,
+                    f"tol {tol:.0e}",
+                    n,
+                    error(tr.states.omega[:, -1], tr.states.quat[:, -1]),
+                    best / n * 1e6,
+                    first - best,
+                    float(tr.num_steps[0]),
+                )
+            )
+    if dname != "float64":
+        return rows
+    weights = jax.random.normal(jax.random.key(0), (n, 7), dt)
+    tol = jnp.asarray(GRAD_TOL, dt)
+
+    def run(omega, adjoint=None):
+        return jaxrb.simulate(
+            scene,
+            jaxrb.make_state(omega=omega),
+            ts,
+            solver=dfx.Dopri8(),
+            rtol=tol,
+            atol=tol,
+            adjoint=adjoint,
+            throw=False,
+        )
+
+    def run_vmap(omega):
+        return jax.vmap(
+            lambda w: jaxrb.simulate(
+                scene,
+                jaxrb.make_state(omega=w),
+                ts,
+                solver=dfx.Dopri8(),
+                rtol=tol,
+                atol=tol,
+                throw=False,
+            )
+        )(omega)
+
+    tr = jax.jit(run)(states0.omega)
+    err = error(tr.states.omega[:, -1], tr.states.quat[:, -1])
+    tangent = jax.random.normal(jax.random.key(1), states0.omega.shape, dt)
+    for label, fn, args in (
+        (
+            "jaxrb.simulate, batched, Dopri8: reverse gradient wrt all N omega0 (jax.grad)",
+            jax.jit(jax.grad(lambda w: _observable(weights, run(w)))),
+            (states0.omega,),
+        ),
+        (
+            "jaxrb.simulate, batched, Dopri8: forward derivative (jax.jvp, ForwardMode)",
+            jax.jit(
+                lambda w, v: jax.jvp(
+                    lambda x: _observable(weights, run(x, dfx.ForwardMode())), (w,), (v,)
+                )
+            ),
+            (states0.omega, tangent),
+        ),
+        (
+            "vmap(jaxrb.simulate), Dopri8: reverse gradient wrt all N omega0 (jax.grad)",
+            jax.jit(jax.grad(lambda w: _observable(weights, run_vmap(w)))),
+            (states0.omega,),
+        ),
+    ):
+        if quick and "vmap" in label:
+            continue
+        first, best, _ = C.time_jax(fn, *args)
+        rows.append(
+            C.Row(
+                "B1",
+                label,
+                dname,
+                f"tol {GRAD_TOL:.0e}",
+                n,
+                err,
+                best / n * 1e6,
+                first - best,
+                float(tr.num_steps[0]) if "batched" in label else math.nan,
+                "error: the forward solution's",
+            )
+        )
+    return rows
+
+
+def plain_rhs(inertia):
+    """The torque-free body's 7-number right-hand side written by hand: (q_dot, omega_dot)
+    with q_dot = 1/2 q (x) (0, omega), Euler's equations in principal axes; any leading axes."""
+
+    def rhs(t, y, args):
+        q, w = y
+        dw = -jnp.cross(w, inertia * w) / inertia
+        q0, q1, q2, q3 = jnp.moveaxis(q, -1, 0)
+        w1, w2, w3 = jnp.moveaxis(w, -1, 0)
+        dq = 0.5 * jnp.stack(
+            [
+                -q1 * w1 - q2 * w2 - q3 * w3,
+                q0 * w1 + q2 * w3 - q3 * w2,
+                q0 * w2 - q1 * w3 + q3 * w1,
+                q0 * w3 + q1 * w2 - q2 * w1,
+            ],
+            -1,
+        )
+        return dq, dw
+
+    return rhs
+
+
+def plain_rows(solver_name, solver, omega0, ts, tols, dname, error):
+    """Plain diffrax on `plain_rhs`, saving at t1 only: vmapped (each body its own solve) and
+    as one solve of the whole batch with the worst body's RMS norm in the PIDController."""
+    n = omega0.shape[0]
+    dt = omega0.dtype
+    rhs = plain_rhs(jnp.asarray(INERTIA, dt))
+
+    def solve(omega, tol, norm):
+        quat = jnp.zeros(omega.shape[:-1] + (4,), dt).at[..., 0].set(1.0)
+        kwargs = {} if norm is None else {"norm": norm}
+        sol = dfx.diffeqsolve(
+            dfx.ODETerm(rhs),
+            solver,
+            ts[0],
+            ts[-1],
+            None,
+            (quat, omega),
+            saveat=dfx.SaveAt(t1=True),
+            stepsize_controller=dfx.PIDController(rtol=tol, atol=tol, **kwargs),
+            max_steps=100_000,
+            throw=False,
+        )
+        return sol.ys[1][-1], sol.ys[0][-1], sol.stats["num_accepted_steps"]
+
+    rows = []
+    for label, fn in (
+        (
+            f"plain diffrax {solver_name}, hand-written rhs, vmap",
+            jax.jit(jax.vmap(lambda w, tol: solve(w, tol, None), in_axes=(0, None))),
+        ),
+        (
+            f"plain diffrax {solver_name}, hand-written rhs, one solve (batch norm)",
+            jax.jit(lambda w, tol: solve(w, tol, batch_rms_norm)),
+        ),
+    ):
+        for tol in tols:
+            first, best, (w, q, steps) = C.time_jax(fn, omega0, jnp.asarray(tol, dt))
+            rows.append(
+                C.Row(
+                    "B1",
+                    label,
+                    dname,
+                    f"tol {tol:.0e}",
+                    n,
+                    error(w, q),
+                    best / n * 1e6,
+                    first - best,
+                    float(jnp.mean(steps)),
+                )
+            )
+    return rows
 
 
 def _has_exact_flow():
@@ -333,7 +572,8 @@ def mujoco_rows(omega0, error, quick):
 
 
 def scaling_points(quick):
-    """us/body vs N for the lean path (tol 1e-10) and vmapped Dopri8 (tol 1e-9), float64."""
+    """us/body vs N for simulate_batch (Dopri8, tol 1e-10) and vmapped Dopri8 (tol 1e-9),
+    float64."""
     pts = []
     scene = scene_for(jnp.float64)
     ts = jnp.array([0.0, T_END])
@@ -343,11 +583,18 @@ def scaling_points(quick):
         for label, devs in C.lean_variants(scene, n):
             f_lean = jax.jit(
                 lambda s: simulate_batch(
-                    scene, s, ts, rtol=1e-10, atol=1e-10, throw=False, devices=devs
+                    scene,
+                    s,
+                    ts,
+                    rtol=1e-10,
+                    atol=1e-10,
+                    solver=dfx.Dopri8(),
+                    throw=False,
+                    devices=devs,
                 )
             )
             _, best, _ = C.time_jax(f_lean, s, repeats=2)
-            label = label.replace("(simulate_batch)", "tol 1e-10").replace(" (default)", "")
+            label = label.replace("Dopri8", "Dopri8 tol 1e-10").replace(" (default)", "")
             pts.append((label, n, best / n * 1e6))
         f_dfx = jax.jit(
             jax.vmap(
@@ -363,6 +610,65 @@ def scaling_points(quick):
     return pts
 
 
+BATCHED = "jaxrb.simulate, batched state (one solve), Dopri8"
+
+
+def targets(rows, bound=1e-8):
+    """The targets as ratios between rows of this run (float64, each on one device): the
+    cheapest row of each method with error <= `bound` against the batched solve's, and the
+    default `vmap(jaxrb.simulate)` against plain diffrax with the same solver and tolerance."""
+
+    def cheapest(method):
+        ok = [r for r in rows if r.method == method and r.dtype == "float64" and r.error <= bound]
+        return min(ok, key=lambda r: r.us_per_body, default=None)
+
+    batched = cheapest(BATCHED)
+    if batched is None:
+        return ""
+    lines = [
+        f"Cheapest rows with error <= {bound:g} (float64), against {BATCHED} "
+        f"({batched.setting}, error {batched.error:.2e}, {batched.us_per_body:.1f} us/body):",
+        "",
+    ]
+    for method in (
+        "plain diffrax Dopri8, hand-written rhs, vmap",
+        "plain diffrax Tsit5, hand-written rhs, vmap",
+        "diffrax Dopri8, vmap(jaxrb.simulate)",
+        "diffrax Tsit5, vmap(jaxrb.simulate)",
+        "jnp RK4 fixed step, vmap",
+        "MuJoCo C RK4, N bodies in one scene",
+    ):
+        r = cheapest(method)
+        if r is not None:
+            lines.append(
+                f"- {method}: {r.setting}, error {r.error:.2e}, {r.us_per_body:.1f} us/body: "
+                f"{r.us_per_body / batched.us_per_body:.1f}x the batched solve's time"
+            )
+    grad = [r for r in rows if r.method.startswith("jaxrb.simulate, batched, Dopri8: reverse")]
+    mujoco = cheapest("MuJoCo C RK4, N bodies in one scene")
+    if grad and mujoco is not None:
+        lines.append(
+            f"- the batched solve's reverse gradient over all N ({grad[0].us_per_body:.1f} "
+            f"us/body): MuJoCo's row takes {mujoco.us_per_body / grad[0].us_per_body:.1f}x as long"
+        )
+    default = [r for r in rows if r.method.startswith("vmap(jaxrb.simulate), default")]
+    plain = [
+        r
+        for r in rows
+        if r.method == "plain diffrax Tsit5, hand-written rhs, vmap"
+        and r.dtype == "float64"
+        and r.setting == "tol 1e-08"
+    ]
+    if default and plain:
+        d, q = default[0], plain[0]
+        lines.append(
+            f"- default path, vmap(jaxrb.simulate) (error {d.error:.2e}, {d.us_per_body:.1f} "
+            f"us/body) against plain diffrax Tsit5 at tol 1e-8 (error {q.error:.2e}, "
+            f"{q.us_per_body:.1f} us/body): {d.us_per_body / q.us_per_body:.2f}x"
+        )
+    return "\n".join(lines) + "\n"
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--n", type=int, default=1000)
@@ -375,13 +681,15 @@ def main(argv=None):
     rows, pts = run(a.n, dtypes, quick=a.quick, scaling=not a.no_scaling)
     dev = C.device_name()
     table = C.markdown_table(rows, dev)
+    summary = targets(rows)
     print(table)
+    print(summary)
     for m, n, t in pts:
         print(f"scaling: {m:35s} N={n:6d} {t:9.2f} us/body")
     if a.out:
         os.makedirs(a.out, exist_ok=True)
         with open(os.path.join(a.out, "b1.md"), "w") as f:
-            f.write("## B1 torque-free asymmetric body\n\n" + table)
+            f.write("## B1 torque-free asymmetric body\n\n" + table + "\n" + summary)
         C.plot_work_precision(
             rows, f"B1 torque-free, N={a.n}, {dev}", os.path.join(a.out, "b1.png")
         )

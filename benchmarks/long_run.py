@@ -2,9 +2,10 @@
 """Long runs: drift of energy, |L| and the quaternion norm over many rotation periods.
 
 Torque-free B1 body (I = (1, 2, 3), omega0 = (1, 0, 1.5)) over `--periods` rotation periods
-(default 1e4; the tests run a 100-period version): lean DOP853, vmap(simulate) Tsit5, the
-Lie-group splitting and the exact flow. Heavy top (B2 scene) over `--top-seconds`: energy error
-of the splitting (bounded) vs the adaptive Runge-Kutta methods (drifting).
+(default 1e4; the tests run a 100-period version): simulate_batch (diffrax Dopri8),
+simulate (Tsit5), the Lie-group splitting and the exact flow. Heavy top (B2 scene) over
+`--top-seconds`: energy error of the splitting (bounded) vs the adaptive Runge-Kutta methods
+(drifting).
 
 Run: python -m benchmarks.long_run --periods 10000 --out bench_out
 """
@@ -59,7 +60,7 @@ def torque_free(periods):
     ]
     runs = [
         (
-            "lean DOP853 tol 1e-10",
+            "simulate_batch Dopri8 tol 1e-10",
             lambda: simulate_batch(
                 scene,
                 jax.tree.map(lambda x: x[None], s0),

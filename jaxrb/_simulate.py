@@ -1,43 +1,49 @@
-"""`simulate`: integrate a scene with diffrax and return full `State`s at the save times."""
+"""`simulate`: integrate a scene with diffrax and return full `State`s at the save times.
+
+One body, or a batch of bodies (a `State` whose leaves have a leading axis N) integrated as
+one diffrax solve with batch-wide step-size control (`jaxrb/_batched.py`).
+"""
 
 import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import optimistix as optx
 
+from ._batched import batch_rms_norm, check_batch_inputs, simulate_batched
 from ._checks import all_met, as_float_array
-from ._dynamics import vector_field
+from ._coordinates import FullState, coordinates_for
 from ._inputs import check_concrete_inputs, check_solver_settings, input_result, safe_times
-from ._quaternion import quat_normalize
 from ._results import RESULTS
+from ._solve import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, default_solver, solve
 from ._state import State
 from ._trajectory import Trajectory
 from .contact import ContactOptions
 from .contact._driver import simulate_contact
 
-DEFAULT_RTOL = 1e-8
-DEFAULT_ATOL = 1e-8
-DEFAULT_MAX_STEPS = 100_000
-
-
-class _Free(eqx.Module):
-    """Coordinates of a free body: the full state (13 numbers)."""
-
-    def reduce(self, state0):
-        return State(state0.pos, quat_normalize(state0.quat), state0.vel, state0.omega)
-
-    def expand(self, y, state0):
-        return State(y.pos, quat_normalize(y.quat), y.vel, y.omega)
-
-    def coordinate_rates(self, y, rates):
-        return rates
-
-    def raw_quat_norm(self, y):
-        return jnp.linalg.norm(y.quat, axis=-1)
-
 
 def _coordinates(scene):
-    return _Free() if scene.joint is None else scene.joint
+    """The scene's one-body coordinates in the joints' interface (`reduce(state0)`,
+    `expand(y, state0)`, `coordinate_rates(y, rates)`): its joint, or a free body's full
+    state. `simulate` itself integrates `coordinates_for(scene)`."""
+    return FullState() if scene.joint is None else scene.joint
+
+
+def _batch_size(state0: State) -> int | None:
+    """None for one body (leaves (3,), (4,), (3,), (3,)), N for a batch ((N, 3), ...)."""
+    for name, n in (("pos", 3), ("quat", 4), ("vel", 3), ("omega", 3)):
+        as_float_array(getattr(state0, name), f"state0.{name}", (n,))
+    shapes = {k: jnp.shape(getattr(state0, k)) for k in ("pos", "quat", "vel", "omega")}
+    if all(len(s) == 1 for s in shapes.values()):
+        return None
+    sizes = {s[0] for s in shapes.values() if len(s) == 2}
+    if all(len(s) == 2 for s in shapes.values()) and len(sizes) == 1:
+        return sizes.pop()
+    shown = ", ".join(f"{k} {s}" for k, s in shapes.items())
+    raise ValueError(
+        "state0 must be one body's state (pos (3,), quat (4,), vel (3,), omega (3,)) or a "
+        f"batch's (pos (N, 3), quat (N, 4), vel (N, 3), omega (N, 3)), got {shown}"
+    )
 
 
 def simulate(
@@ -63,12 +69,20 @@ def simulate(
     **Arguments:**
 
     - `scene`: a `Scene`.
-    - `state0`: the initial `State` (unbatched; use `jax.vmap` for batches). The quaternion
-      is normalised (any non-zero norm is accepted). For a jointed scene only `quat` and
-      `omega` matter (plus `pos` to place the anchor): the velocity follows from the joint,
-      and a hinge keeps only the component of `omega` along its axis.
+    - `state0`: the initial `State` of one body (leaves pos (3,), quat (4,), vel (3,),
+      omega (3,)), or of a batch of N bodies (pos (N, 3), quat (N, 4), vel (N, 3),
+      omega (N, 3)) in the same scene: see *Batches* below. The quaternion is normalised
+      (any non-zero norm is accepted). For a jointed scene only `quat` and `omega` matter
+      (plus `pos` to place the anchor): the velocity follows from the joint, and a hinge
+      keeps only the component of `omega` along its axis.
     - `ts`: increasing save times (s), shape (T,); the solve runs from ts[0] to ts[-1].
-    - `solver`: any diffrax solver; default `diffrax.Tsit5()` (5th order, adaptive).
+    - `solver`: any diffrax solver. Default, chosen by `rtol` for scenes without a floor:
+      `diffrax.Dopri8()` (8th order) where it reaches a given error at less cost, i.e. when
+      rtol < 1e-9 for one body (also under `jax.vmap`) and rtol < 1e-5 for a batched
+      `state0` (whose solve shares its fixed cost per step over the batch), else
+      `diffrax.Tsit5()` (5th order). A traced rtol (under jit) gets the choice for the
+      default rtol 1e-8; a `stepsize_controller` of your own and scenes with a floor get
+      Tsit5. Measured: `benchmarks/README.md`, B1.
     - `rtol`, `atol`: tolerances of the default PID step-size controller (default 1e-8 each;
       with float32, use about 1e-5).
     - `dt0`: initial step (s); default: chosen by the controller.
@@ -76,13 +90,14 @@ def simulate(
     - `stepsize_controller`: replaces the default `PIDController(rtol, atol)`; pass
       `ConstantStepSize()` with `dt0` for fixed steps.
     - `adjoint`: diffrax adjoint; default `RecursiveCheckpointAdjoint()` (reverse mode). For
-      forward-mode differentiation (`jax.jacfwd`) pass `diffrax.ForwardMode()`.
+      forward-mode differentiation (`jax.jacfwd`, `jax.jvp`) pass `diffrax.ForwardMode()`.
     - `progress_meter`: e.g. `diffrax.TqdmProgressMeter()` for long runs.
     - `throw`: if True (default) raise on bad input or solver failure (concrete bad values
-      raise a ValueError naming the field before anything is compiled); if False, return a
-      per-trajectory `result` code instead, for concrete and traced input alike (use this
-      under `jax.vmap`: a bad member is flagged and takes no solver steps, the others are
-      computed). Structural mistakes (wrong shapes or types) always raise.
+      raise a ValueError naming the field, and for a batch the member, before anything is
+      compiled); if False, return a per-trajectory `result` code instead, for concrete and
+      traced input alike (a bad member of a batch, or under `jax.vmap`, is flagged and
+      takes no solver steps, the others are computed). Structural mistakes (wrong shapes or
+      types) always raise.
     - `max_impacts`, `rest_speed`: scenes with a floor only: shortcuts for the options of the
       same names in `contact` (the bound on the number of impacts, default 64; the speed below
       which a bounce series is replaced by its limit, default 1e-2 m/s).
@@ -90,6 +105,27 @@ def simulate(
       tolerances of the contact engine; docs/contact.md).
 
     **Returns:** a `Trajectory` with full `State`s at `ts`.
+
+    **What is integrated:** a free body whose only forces are uniform `Gravity` (or none)
+    integrates its rotation only (quat, omega: no moment acts about the mass centre) and its
+    mass centre follows the exact parabola; any other force integrates the full state; a
+    jointed body integrates the joint's coordinates.
+
+    **Batches:** with a batched `state0` the whole batch is one diffrax solve: the
+    right-hand side is mapped over the members and one step-size controller serves them all,
+    accepting a step when the worst member's error norm is <= 1 (the default controller is a
+    `PIDController` whose `norm` is the largest of the members' RMS norms; a `PIDController`
+    you pass with diffrax's default norm gets that norm too). All members take the same
+    steps, so batch members of similar time scales together. Every array that
+    `jax.vmap(simulate)` would return per member has a leading axis N: the states' leaves are
+    (N, T, ...), `result`, `quat_norm_drift` and `num_steps` (N,) (`num_steps` is the shared
+    count); `ts` is returned once, shape (T,). A member with bad input is flagged in `result`
+    (with `throw=False`), takes no part in the step control and has NaN states; the others are
+    computed. The solve is differentiable like a single body's (reverse mode by default,
+    forward mode with `adjoint=diffrax.ForwardMode()`). `jax.vmap(simulate)` still works and
+    gives each member its own step-size control. A scene with a floor runs the contact
+    engine per member (`jax.vmap` over the batch). To split a batch over several devices,
+    or to give each member its own scene parameters, use `jaxrb.simulate_batch`.
 
     Quaternion-norm policy: the right-hand side normalises q before rotating vectors, the
     kinematics preserve |q| up to the solver's error, and saved quaternions are normalised;
@@ -102,9 +138,10 @@ def simulate(
         ts = ts.astype(float)
     if not isinstance(state0, State):
         raise TypeError(f"state0 must be a jaxrb.State, got {type(state0).__name__}")
-    for name, n in (("pos", 3), ("quat", 4), ("vel", 3), ("omega", 3)):
-        as_float_array(getattr(state0, name), f"state0.{name}", (n,))
+    n_batch = _batch_size(state0)
     if throw:
+        if n_batch is not None:
+            check_batch_inputs(state0)
         check_concrete_inputs(state0, ts)
     settings_ok = all_met(
         check_solver_settings(
@@ -116,7 +153,8 @@ def simulate(
         )
     )
     if solver is None:
-        solver = dfx.Tsit5()
+        free = scene.floor is None and stepsize_controller is None
+        solver = default_solver(rtol, n_batch is not None) if free else dfx.Tsit5()
     if stepsize_controller is None:
         # tolerances as arrays, so that new values do not trigger a recompilation
         stepsize_controller = dfx.PIDController(rtol=jnp.asarray(rtol), atol=jnp.asarray(atol))
@@ -130,23 +168,32 @@ def simulate(
             contact = ContactOptions(**{k: v for k, v in shortcuts.items() if v is not None})
         elif max_impacts is not None or rest_speed is not None:
             raise ValueError("give max_impacts and rest_speed inside `contact`, not beside it")
-        return simulate_contact(
-            scene,
-            state0,
-            ts,
-            solver=solver,
-            stepsize_controller=stepsize_controller,
-            adjoint=adjoint,
-            dt0=dt0,
-            max_steps=max_steps,
-            throw=throw,
-            options=contact,
-            settings_ok=settings_ok,
-        )
+
+        def one(s):
+            return simulate_contact(
+                scene,
+                s,
+                ts,
+                solver=solver,
+                stepsize_controller=stepsize_controller,
+                adjoint=adjoint,
+                dt0=dt0,
+                max_steps=max_steps,
+                throw=throw,
+                options=contact,
+                settings_ok=settings_ok,
+            )
+
+        return one(state0) if n_batch is None else _vmap_members(one, state0)
     if progress_meter is None:
         progress_meter = dfx.NoProgressMeter()
     state0 = jax.tree.map(lambda x: jnp.asarray(x, ts.dtype), state0)
-    return _simulate_smooth(
+    if n_batch is None:
+        core = _simulate_smooth
+    else:
+        core = simulate_batched
+        stepsize_controller = batch_controller(stepsize_controller)
+    traj = core(
         scene,
         state0,
         ts,
@@ -156,9 +203,25 @@ def simulate(
         progress_meter,
         dt0,
         max_steps,
-        throw,
         settings_ok,
     )
+    if throw:  # outside the compiled function: throw=True/False share one compilation
+        traj = traj.result.error_if(traj, traj.result != RESULTS.successful)
+    return traj
+
+
+def batch_controller(controller):
+    """A `PIDController` with diffrax's default norm gets the batch norm (the worst member's
+    RMS norm); any other controller is used as given."""
+    if isinstance(controller, dfx.PIDController) and controller.norm is optx.rms_norm:
+        return eqx.tree_at(lambda c: c.norm, controller, batch_rms_norm)
+    return controller
+
+
+def _vmap_members(fn, states0):
+    """`fn` (one body's `simulate`) mapped over the batch; `ts` returned once."""
+    traj = jax.vmap(fn)(states0)
+    return eqx.tree_at(lambda t: t.ts, traj, traj.ts[0])
 
 
 @eqx.filter_jit
@@ -172,42 +235,30 @@ def _simulate_smooth(
     progress_meter,
     dt0,
     max_steps,
-    throw,
     settings_ok,
 ):
-    coords = _coordinates(scene)
-    y0 = coords.reduce(state0)
+    """One body, no floor: one diffrax solve in the scene's coordinates."""
+    coords = coordinates_for(scene)
     result = input_result(scene, state0, ts, settings_ok)
     run_ts = safe_times(ts, result == RESULTS.successful)
-
-    def rhs(t, y, args):
-        state = coords.expand(y, state0)
-        return coords.coordinate_rates(y, vector_field(t, state, scene))
-
-    sol = dfx.diffeqsolve(
-        dfx.ODETerm(rhs),
-        solver,
-        t0=run_ts[0],
-        t1=run_ts[-1],
-        dt0=dt0,
-        y0=y0,
-        saveat=dfx.SaveAt(ts=run_ts),
+    ys, num_steps, solver_result = solve(
+        lambda t, y: coords.rates(scene, t, y, state0),
+        coords.reduce(scene, state0),
+        run_ts,
+        solver=solver,
         stepsize_controller=stepsize_controller,
         adjoint=adjoint,
+        dt0=dt0,
         max_steps=max_steps,
         progress_meter=progress_meter,
-        throw=False,
     )
-    states = jax.vmap(lambda y: coords.expand(y, state0))(sol.ys)
-    drift = jnp.max(jnp.abs(jax.vmap(coords.raw_quat_norm)(sol.ys) - 1))
-    result = RESULTS.where(result == RESULTS.successful, RESULTS.promote(sol.result), result)
-    traj = Trajectory(
+    states = coords.states(scene, ys, run_ts, state0)
+    drift = jnp.max(jnp.abs(coords.raw_quat_norm(scene, ys) - 1))
+    ok = result == RESULTS.successful
+    return Trajectory(
         ts=ts,
         states=states,
-        result=result,
+        result=RESULTS.where(ok, RESULTS.promote(solver_result), result),
         quat_norm_drift=drift,
-        num_steps=sol.stats["num_accepted_steps"],
+        num_steps=num_steps,
     )
-    if throw:
-        traj = result.error_if(traj, result != RESULTS.successful)
-    return traj

@@ -1,0 +1,135 @@
+"""Integration coordinates: which numbers of a scene without a floor go through the solver.
+
+- `FREE`: a free body under any forces: the full state (pos, quat, vel, omega), 13 numbers.
+- `ROTATION`: a free body whose forces are all uniform `Gravity` (or none), which exert no
+  moment about the mass centre: only the rotation (quat, omega: 7 numbers) is integrated,
+  and the mass centre follows the exact parabola p0 + v0 t + g t^2 / 2.
+- `JOINT`: a body on a `Pivot` (quat, omega) or a `Hinge` (one angle and its rate), in the
+  joint's own coordinates (`jaxrb/_joints.py`).
+
+Each kind gives, for one body: `reduce` (the coordinates at the initial state), `rates`
+(their time derivative: the Newton-Euler equations with quaternion kinematics, as
+`jaxrb.vector_field`), `states` (full `State`s at the save times) and `raw_quat_norm` (|q|
+of the integrated quaternion before normalisation, at the save times). The scene is an
+argument of each, so a batch of scenes maps over them with `jax.vmap`.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from ._dynamics import accelerations
+from ._forces import Gravity
+from ._quaternion import quat_normalize
+from ._rates import quat_rate
+from ._rotational import angular_acceleration
+from ._state import State
+
+
+def _unit(q):
+    """q / |q| for an integrated quaternion (|q| stays within the solver's error of 1; the
+    initial one is normalised by `quat_normalize`, which accepts any finite non-zero norm)."""
+    return q * jax.lax.rsqrt(jnp.sum(q * q, axis=-1, keepdims=True))
+
+
+def _quat_norm(q):
+    return jnp.sqrt(jnp.sum(q * q, axis=-1))
+
+
+class _Free(eqx.Module):
+    """The full state: pos and vel (world frame, m, m/s), quat, omega (body frame, rad/s)."""
+
+    def reduce(self, scene, state0: State):
+        return State(state0.pos, quat_normalize(state0.quat), state0.vel, state0.omega)
+
+    def rates(self, scene, t, y: State, state0: State) -> State:
+        unit = State(y.pos, _unit(y.quat), y.vel, y.omega)
+        acc, omega_dot = accelerations(t, unit, scene)
+        return State(y.vel, quat_rate(y.quat, y.omega), acc, omega_dot)
+
+    def states(self, scene, ys: State, ts, state0: State) -> State:
+        return State(ys.pos, _unit(ys.quat), ys.vel, ys.omega)
+
+    def raw_quat_norm(self, scene, ys):
+        return _quat_norm(ys.quat)
+
+
+class _Rotation(eqx.Module):
+    """(quat, omega) of a free body with no moment about its mass centre; the mass centre's
+    motion is the exact parabola of the scene's total gravity."""
+
+    def reduce(self, scene, state0: State):
+        return (quat_normalize(state0.quat), state0.omega)
+
+    def rates(self, scene, t, y, state0: State):
+        quat, omega = y
+        body = scene.body
+        omega_dot = angular_acceleration(
+            body.inertia.astype(omega.dtype), body.principal, omega, jnp.zeros_like(omega)
+        )
+        return (quat_rate(quat, omega), omega_dot)
+
+    def states(self, scene, ys, ts, state0: State) -> State:
+        """`ys` leaves have a leading time axis (T, ...); `ts` (T,) are their times (s)."""
+        quat, omega = ys
+        dtype = omega.dtype
+        g = sum((f.g.astype(dtype) for f in scene.forces), jnp.zeros(3, dtype))
+        dt = (ts - ts[0])[:, None]
+        pos = state0.pos + state0.vel * dt + 0.5 * g * dt**2
+        vel = state0.vel + g * dt
+        return State(pos, _unit(quat), vel, omega)
+
+    def raw_quat_norm(self, scene, ys):
+        return _quat_norm(ys[0])
+
+
+class _Joint(eqx.Module):
+    """The coordinates of the scene's joint (`AbstractJoint.reduce`, `expand`, ...)."""
+
+    def reduce(self, scene, state0: State):
+        return scene.joint.reduce(state0)
+
+    def rates(self, scene, t, y, state0: State):
+        state = scene.joint.expand(y, state0)  # unit quaternion
+        acc, omega_dot = accelerations(t, state, scene)
+        rates = State(state.vel, quat_rate(state.quat, state.omega), acc, omega_dot)
+        return scene.joint.coordinate_rates(y, rates)
+
+    def states(self, scene, ys, ts, state0: State) -> State:
+        return jax.vmap(lambda y: scene.joint.expand(y, state0))(ys)
+
+    def raw_quat_norm(self, scene, ys):
+        """|q| of a pivot's integrated quaternion; 1 for a hinge (which integrates an angle)."""
+        first = jax.tree.leaves(ys)[0]
+        norms = jax.vmap(scene.joint.raw_quat_norm)(ys)
+        return jnp.broadcast_to(norms, first.shape[:1]).astype(first.dtype)
+
+
+FREE, ROTATION, JOINT = _Free(), _Rotation(), _Joint()
+
+
+class FullState(eqx.Module):
+    """A free body's full state in the joints' one-body interface (`AbstractJoint.reduce`,
+    `expand`, `coordinate_rates`, `raw_quat_norm`), for callers that evaluate
+    `jaxrb.vector_field` themselves (e.g. the scipy peers in benchmarks/)."""
+
+    def reduce(self, state0: State) -> State:
+        return State(state0.pos, quat_normalize(state0.quat), state0.vel, state0.omega)
+
+    def expand(self, y: State, state0: State) -> State:
+        return State(y.pos, quat_normalize(y.quat), y.vel, y.omega)
+
+    def coordinate_rates(self, y: State, rates: State) -> State:
+        return rates
+
+    def raw_quat_norm(self, y: State):
+        return _quat_norm(y.quat)
+
+
+def coordinates_for(scene):
+    """The cheapest coordinates that describe the scene's motion exactly (no floor)."""
+    if scene.joint is not None:
+        return JOINT
+    if all(type(f) is Gravity for f in scene.forces):
+        return ROTATION
+    return FREE

@@ -1,0 +1,62 @@
+"""One diffrax solve from ts[0] to ts[-1] saving at ts, and the default solver settings of
+`simulate` (one body or a batch as one solve) and `simulate_batch`."""
+
+import diffrax as dfx
+import numpy as np
+
+from ._checks import is_concrete
+
+DEFAULT_RTOL = 1e-8
+DEFAULT_ATOL = 1e-8
+DEFAULT_MAX_STEPS = 100_000
+
+# Below these rtols the 8th-order Dopri8 reaches a given error at less cost than the
+# 5th-order Tsit5, measured on benchmark B1 (the torque-free body; benchmarks/README.md): for
+# one body (also per member under jax.vmap), and for a batch integrated as one solve, whose
+# fixed cost per step is shared by the batch, so that fewer, costlier steps pay sooner.
+HIGH_ORDER_RTOL = 1e-9
+HIGH_ORDER_RTOL_BATCH = 1e-5
+
+
+def default_solver(rtol, batch: bool = False) -> dfx.AbstractSolver:
+    """`diffrax.Dopri8()` for rtol below `HIGH_ORDER_RTOL` (`HIGH_ORDER_RTOL_BATCH` for a
+    batch as one solve), else `diffrax.Tsit5()`. A traced rtol (its value unknown when the
+    solver is chosen) gets the choice for the default rtol, `DEFAULT_RTOL`."""
+    value = float(np.max(np.asarray(rtol))) if is_concrete(rtol) else DEFAULT_RTOL
+    if value < (HIGH_ORDER_RTOL_BATCH if batch else HIGH_ORDER_RTOL):
+        return dfx.Dopri8()
+    return dfx.Tsit5()
+
+
+def save_at(ts) -> dfx.SaveAt:
+    """Save at `ts` (shape (T,)): the end points are the solve's own t0 and t1 (no
+    interpolation there), the times between them are interpolated."""
+    if ts.shape[0] == 1:
+        return dfx.SaveAt(t0=True)
+    if ts.shape[0] == 2:
+        return dfx.SaveAt(t0=True, t1=True)
+    return dfx.SaveAt(t0=True, ts=ts[1:-1], t1=True)
+
+
+def solve(rhs, y0, ts, *, solver, stepsize_controller, adjoint, dt0, max_steps, progress_meter):
+    """Integrate dy/dt = rhs(t, y) from ts[0] to ts[-1] (any pytree y).
+
+    **Returns:** `(ys, num_accepted_steps, result)`: `ys` like y0 with a leading time axis
+    (T, ...) holding y at `ts`; the diffrax result code. Never raises (throw=False): the
+    caller decides.
+    """
+    sol = dfx.diffeqsolve(
+        dfx.ODETerm(lambda t, y, args: rhs(t, y)),
+        solver,
+        t0=ts[0],
+        t1=ts[-1],
+        dt0=dt0,
+        y0=y0,
+        saveat=save_at(ts),
+        stepsize_controller=stepsize_controller,
+        adjoint=adjoint,
+        max_steps=max_steps,
+        progress_meter=progress_meter,
+        throw=False,
+    )
+    return sol.ys, sol.stats["num_accepted_steps"], sol.result
