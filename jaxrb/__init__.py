@@ -10,6 +10,10 @@ import importlib.metadata
 from . import dice as dice, inertia as inertia
 from ._batched import simulate_batch as simulate_batch
 from ._body import RigidBody as RigidBody
+from ._compilation import (
+    default_cache_dir as default_cache_dir,
+    speed_up_compilation as speed_up_compilation,
+)
 from ._dynamics import (
     accelerations as accelerations,
     joint_reaction as joint_reaction,
@@ -76,6 +80,7 @@ from ._splitting import simulate_splitting as simulate_splitting
 from ._state import State as State, make_state as make_state
 from ._surfaces import Bowl as Bowl, Cone as Cone
 from ._sweep import grid as grid, random_draws as random_draws, sweep as sweep
+from .contact._lanes import simulate_throws as simulate_throws
 
 # [contact]
 

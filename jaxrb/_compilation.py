@@ -7,8 +7,8 @@ program's entry point (the `jaxrb` command line calls it, and so can a script or
   back by the next process that compiles the same program, instead of compiling it again;
 - on the CPU, XLA's older kernel emitters (`--xla_cpu_use_fusion_emitters=false`): for
   jaxrb's contact programs (tens of thousands of small operations) they compile in about
-  three quarters of the time and run at least as fast (measured on a 2-core x86 CPU: a
-  die's program 48 s -> 36 s of compile CPU time, its run 238 ms -> 148 ms).
+  four fifths of the time and run no slower (measured on a 2-core x86 CPU: a die's
+  program 55 s -> 43 s of compile CPU time, its 16 s throw about 0.23 s either way).
 """
 
 import os

@@ -1,7 +1,10 @@
 """One diffrax solve from ts[0] to ts[-1] saving at ts, and the default solver settings of
 `simulate` (one body or a batch as one solve) and `simulate_batch`."""
 
+import contextlib
+
 import diffrax as dfx
+import equinox as eqx
 import numpy as np
 
 from ._checks import is_concrete
@@ -28,6 +31,25 @@ def default_solver(rtol, batch: bool = False) -> dfx.AbstractSolver:
     return dfx.Tsit5()
 
 
+@contextlib.contextmanager
+def checks_without_host_callbacks():
+    """While tracing a `diffrax.diffeqsolve` of jaxrb's: its checks of the save times (sorted,
+    between t0 and t1) and of dt0, which jaxrb makes itself before the solve (and flags per
+    trajectory), return NaN where they fail instead of raising through a host callback. JAX's
+    persistent compilation cache keeps no program with a host callback: without this, no
+    compiled simulation could be cached. Only equinox's default `EQX_ON_ERROR=raise` is
+    changed; any other setting (e.g. `breakpoint` for debugging) is left as it is."""
+    errors = getattr(eqx, "_errors", None)
+    if getattr(errors, "EQX_ON_ERROR", None) != "raise":
+        yield
+        return
+    errors.EQX_ON_ERROR = "nan"
+    try:
+        yield
+    finally:
+        errors.EQX_ON_ERROR = "raise"
+
+
 def save_at(ts) -> dfx.SaveAt:
     """Save at `ts` (shape (T,)): the end points are the solve's own t0 and t1 (no
     interpolation there), the times between them are interpolated."""
@@ -45,18 +67,19 @@ def solve(rhs, y0, ts, *, solver, stepsize_controller, adjoint, dt0, max_steps, 
     (T, ...) holding y at `ts`; the diffrax result code. Never raises (throw=False): the
     caller decides.
     """
-    sol = dfx.diffeqsolve(
-        dfx.ODETerm(lambda t, y, args: rhs(t, y)),
-        solver,
-        t0=ts[0],
-        t1=ts[-1],
-        dt0=dt0,
-        y0=y0,
-        saveat=save_at(ts),
-        stepsize_controller=stepsize_controller,
-        adjoint=adjoint,
-        max_steps=max_steps,
-        progress_meter=progress_meter,
-        throw=False,
-    )
+    with checks_without_host_callbacks():
+        sol = dfx.diffeqsolve(
+            dfx.ODETerm(lambda t, y, args: rhs(t, y)),
+            solver,
+            t0=ts[0],
+            t1=ts[-1],
+            dt0=dt0,
+            y0=y0,
+            saveat=save_at(ts),
+            stepsize_controller=stepsize_controller,
+            adjoint=adjoint,
+            max_steps=max_steps,
+            progress_meter=progress_meter,
+            throw=False,
+        )
     return sol.ys, sol.stats["num_accepted_steps"], sol.result

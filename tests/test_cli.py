@@ -401,3 +401,33 @@ def test_console_entry_point():
     )
     assert proc.returncode == 0, proc.stderr
     assert "usage: jaxrb" in proc.stdout
+
+
+def test_compilation_cache_in_the_users_cache_directory(scene_file, tmp_path):
+    """`jaxrb run` keeps its compiled programs in $JAXRB_CACHE_DIR (by default the user's
+    cache directory); `--no-cache` writes none."""
+    import os
+
+    from jaxrb import default_cache_dir
+
+    for no_cache in (False, True):
+        cache = tmp_path / f"cache-{no_cache}"
+        env = {**os.environ, "JAXRB_CACHE_DIR": str(cache)}
+        env.pop("JAX_COMPILATION_CACHE_DIR", None)
+        args = ["run", str(scene_file), "-o", str(tmp_path / f"out-{no_cache}"), "-q"]
+        proc = subprocess.run(
+            [sys.executable, "-m", "jaxrb", *args, *(["--no-cache"] if no_cache else [])],
+            capture_output=True,
+            text=True,
+            timeout=300,
+            env=env,
+        )
+        assert proc.returncode == 0, proc.stderr
+        files = list(cache.rglob("*")) if cache.exists() else []
+        assert (len(files) == 0) == no_cache, files
+    env_dir = tmp_path / "elsewhere"
+    os.environ["JAXRB_CACHE_DIR"], saved = str(env_dir), os.environ["JAXRB_CACHE_DIR"]
+    try:
+        assert default_cache_dir() == env_dir
+    finally:
+        os.environ["JAXRB_CACHE_DIR"] = saved

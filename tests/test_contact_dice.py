@@ -146,6 +146,45 @@ def test_die_batch_vmap_equals_per_member(getkey):
         )
 
 
+def _rel(a, b):
+    """Largest relative difference of two pytrees of arrays (1e-3 absolute floor)."""
+    return max(
+        float(np.max(np.abs(np.asarray(x) - np.asarray(y)) / (1e-3 + np.abs(np.asarray(x)))))
+        for x, y in zip(jax.tree.leaves(a), jax.tree.leaves(b), strict=True)
+    )
+
+
+def test_throws_in_refilled_lanes_equal_per_throw_runs(getkey):
+    """`simulate_throws`: 7 throws in 3 lanes (finished lanes take the next throw) give each
+    throw the trajectory of its own `simulate` run, up to the problem's conditioning (as in
+    the vmap test above); a throw with bad input is flagged and the others are computed."""
+    scene = _tumbler(jaxrb.Box((A_DIE, A_DIE, A_DIE)), 0.6, 0.3)
+    n = 7
+    omegas = jax.random.normal(getkey(), (n, 3)) * 10.0
+    heights = jax.random.uniform(getkey(), (n,), minval=0.02, maxval=0.06)
+    omegas = omegas.at[4, 1].set(jnp.nan)  # bad input
+    ts = jnp.linspace(0.0, 0.15, 4)
+    states0 = jax.vmap(lambda w, z: _throw(omega=w, z=z))(omegas, heights)
+    out = jaxrb.simulate_throws(scene, states0, ts, lanes=3, max_impacts=24)
+    assert out.states.pos.shape == (n, 4, 3)
+    ok = np.asarray(out.result == jaxrb.RESULTS.successful)
+    assert ok.tolist() == [True] * 4 + [False] + [True] * 2
+    counts = np.asarray(out.impacts.count)
+    assert len(set(counts[ok].tolist())) > 1  # the throws take different numbers of passes
+    for i in np.flatnonzero(ok):
+        one = _die_run(scene, _throw(omega=omegas[i], z=heights[i]), ts)
+        assert int(one.impacts.count) == counts[i]
+        nudged = _die_run(scene, _throw(omega=omegas[i] * (1 + 1e-15), z=heights[i]), ts)
+        member = jax.tree.map(lambda x, i=i: x[i], out.states)
+        assert _rel(one.states, member) <= 10 * _rel(one.states, nudged.states) + 1e-12
+        np.testing.assert_allclose(
+            np.asarray(one.impacts.time[: counts[i]]),
+            np.asarray(out.impacts.time[i, : counts[i]]),
+            rtol=0,
+            atol=1e-9,
+        )
+
+
 # ------------------------------------------------------------------ sliding contact
 
 

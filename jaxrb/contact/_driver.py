@@ -19,6 +19,7 @@ from .._inputs import input_result, safe_times
 from .._quaternion import quat_normalize
 from .._results import RESULTS
 from .._shapes import Sphere
+from .._solve import checks_without_host_callbacks
 from .._state import State
 from .._trajectory import Trajectory
 from ._events import (
@@ -98,7 +99,7 @@ def simulate_contact(
                 "floor plane"
             )
     kind = "lax" if isinstance(adjoint, dfx.ForwardMode) else "checkpointed"
-    return _simulate_contact(
+    traj = _simulate_contact(
         scene,
         state0,
         ts,
@@ -107,12 +108,14 @@ def simulate_contact(
         adjoint,
         dt0,
         max_steps,
-        throw,
         options,
         tol,
         kind,
         settings_ok,
     )
+    if throw:  # outside the compiled program: throw=True and False share one compilation
+        traj = traj.result.error_if(traj, traj.result != RESULTS.successful)
+    return traj
 
 
 class _Segment(eqx.Module):
@@ -259,23 +262,24 @@ class ContactProgram(eqx.Module):
         limit0 = step_limit_of(start, mode, offsets, model, tol)
         done = done | too_many | paradox
         t0 = jnp.where(done, t_end, t0)
-        sol = dfx.diffeqsolve(
-            dfx.ODETerm(lambda t, y, args: mode_rates(t, y, args.mode, args.scene, model, tol)),
-            self.solver,
-            t0=t0,
-            t1=t_end,
-            dt0=self.dt0,
-            y0=y,
-            args=_Segment(scene, mode, offsets, limit0),
-            saveat=dfx.SaveAt(
-                subs=[dfx.SubSaveAt(ts=jnp.clip(ts, t0, t_end)), dfx.SubSaveAt(t1=True)]
-            ),
-            stepsize_controller=self.controller,
-            adjoint=self.adjoint,
-            max_steps=self.max_steps,
-            event=_event(model, tol),
-            throw=False,
-        )
+        with checks_without_host_callbacks():
+            sol = dfx.diffeqsolve(
+                dfx.ODETerm(lambda t, y, args: mode_rates(t, y, args.mode, args.scene, model, tol)),
+                self.solver,
+                t0=t0,
+                t1=t_end,
+                dt0=self.dt0,
+                y0=y,
+                args=_Segment(scene, mode, offsets, limit0),
+                saveat=dfx.SaveAt(
+                    subs=[dfx.SubSaveAt(ts=jnp.clip(ts, t0, t_end)), dfx.SubSaveAt(t1=True)]
+                ),
+                stepsize_controller=self.controller,
+                adjoint=self.adjoint,
+                max_steps=self.max_steps,
+                event=_event(model, tol),
+                throw=False,
+            )
         t_stop = sol.ts[1][0]
         y_stop = jax.tree.map(lambda x: x[0], sol.ys[1])
         ev = jnp.asarray(sol.event_mask) & ~done
@@ -387,7 +391,6 @@ def _simulate_contact(
     adjoint,
     dt0,
     max_steps,
-    throw,
     options,
     tol,
     loop_kind,
@@ -403,7 +406,4 @@ def _simulate_contact(
         max_steps=options.max_events + 1,  # the start, then one pass per event
         kind=loop_kind,
     )
-    traj = program.trajectory(carry, ts)
-    if throw:
-        traj = traj.result.error_if(traj, traj.result != RESULTS.successful)
-    return traj
+    return program.trajectory(carry, ts)
