@@ -6,11 +6,15 @@ import pytest
 
 import jaxrb
 
-# Compiled programs go to the repository's .cache/ (never the user's cache): the workers
-# share them, so a program two test modules use is compiled once per run, and a second run
-# of the suite reads them back. The command line (called in-process and in subprocesses by
-# the tests) and the notebooks' kernels find the same directory through the environment.
-_CACHE = Path(__file__).resolve().parent.parent / ".cache" / "jax-tests"
+# Compiled programs go to their own cache beside the user's jaxrb cache (never into it):
+# `jax-tests` next to `jaxrb.default_cache_dir()` (e.g. ~/.cache/jaxrb/jax-tests), or
+# $JAXRB_TEST_CACHE_DIR. The workers share it, so a program two test modules use is compiled
+# once, and a later run of the suite (of any checkout) reads back every program that has not
+# changed. The command line (called in-process and in subprocesses by the tests) and the
+# notebooks' kernels find the same directory through the environment.
+_CACHE = Path(
+    os.environ.get("JAXRB_TEST_CACHE_DIR") or jaxrb.default_cache_dir().with_name("jax-tests")
+)
 os.environ["JAXRB_CACHE_DIR"] = str(_CACHE)
 os.environ["JAX_COMPILATION_CACHE_DIR"] = str(_CACHE)
 os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0.5"
