@@ -41,17 +41,13 @@ def _backend_started() -> bool:
     return bool(xla_bridge._backends)
 
 
-CACHE_MAX_BYTES = 2 * 1024**3
-
-
 def speed_up_compilation(cache: bool = True, cache_dir=None) -> Path | None:
     """Turn on the persistent compilation cache (if `cache`) in `cache_dir` (default
-    `default_cache_dir()`), at most `CACHE_MAX_BYTES` (2 GiB: the least recently used
-    programs are removed beyond it; a contact scene's program takes 0.5-2 MB), and, if JAX
-    has not started its CPU backend yet and `XLA_FLAGS` does not choose otherwise, the
-    quicker CPU kernel emitters. Changes process-wide settings: call it once at the start
-    of a program. The cache directory can be deleted at any time. Returns the cache
-    directory (None without a cache)."""
+    `default_cache_dir()`; a contact scene's program takes 0.5-2 MB there, and nothing is
+    removed by itself: the directory can be deleted at any time), and, if JAX has not
+    started its CPU backend yet and `XLA_FLAGS` does not choose otherwise, the quicker CPU
+    kernel emitters. Changes process-wide settings: call it once at the start of a program.
+    Returns the cache directory (None without a cache)."""
     flags = os.environ.get("XLA_FLAGS", "")
     if "xla_cpu_use_fusion_emitters" not in flags and not _backend_started():
         os.environ["XLA_FLAGS"] = f"{flags} {CPU_FLAG}".strip()
@@ -62,10 +58,4 @@ def speed_up_compilation(cache: bool = True, cache_dir=None) -> Path | None:
     jax.config.update("jax_compilation_cache_dir", str(directory))
     # programs quicker to compile than this are not worth a file
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
-    try:
-        import filelock  # noqa: F401 (JAX's size limit needs it)
-
-        jax.config.update("jax_compilation_cache_max_size", CACHE_MAX_BYTES)
-    except ImportError:
-        pass
     return directory

@@ -38,7 +38,9 @@ def checks_without_host_callbacks():
     trajectory), return NaN where they fail instead of raising through a host callback. JAX's
     persistent compilation cache keeps no program with a host callback: without this, no
     compiled simulation could be cached. Only equinox's default `EQX_ON_ERROR=raise` is
-    changed; any other setting (e.g. `breakpoint` for debugging) is left as it is."""
+    changed; any other setting (e.g. `breakpoint` for debugging) is left as it is. (equinox
+    keeps the traced check for reuse: a diffrax solve of the same array shapes traced later
+    in the same process, outside jaxrb, may get the NaN form of these two checks too.)"""
     errors = getattr(eqx, "_errors", None)
     if getattr(errors, "EQX_ON_ERROR", None) != "raise":
         yield
