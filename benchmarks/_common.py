@@ -146,7 +146,7 @@ def markdown_table(rows: list[Row], device: str) -> str:
     )
     lines = [
         f"| {r.problem} | {r.method} | {r.dtype} | {r.setting} | {r.n} | {fmt(r.error)} | "
-        f"{fmt(r.us_per_body, '.1f')} | {fmt(r.body_steps_per_s, '.2e')} | {fmt(r.steps, '.0f')} | "
+        f"{fmt(r.us_per_body, '.3g')} | {fmt(r.body_steps_per_s, '.2e')} | {fmt(r.steps, '.0f')} | "
         f"{fmt(r.compile_s, '.1f')} | {r.note} |"
         for r in rows
     ]

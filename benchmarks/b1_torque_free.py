@@ -112,7 +112,10 @@ def rk4_fixed(scene, n_steps):
     return jax.jit(jax.vmap(one))
 
 
-def run(n=1000, dtypes=("float64", "float32"), n_python=10, quick=False, scaling=True):
+def run(n=1000, dtypes=("float64", "float32"), n_python=10, quick=False, scaling=True, large=False):
+    """The rows of B1 at batch size `n`. With `large` (N = 1e5 to 1e6, on a GPU) only the
+    methods that treat the batch as arrays: the batched solve with its gradients, fixed-step
+    RK4 and the exact flow; no vmap of adaptive solves, per-body loops or peers."""
     rows: list[C.Row] = []
     omega0 = initial_omegas(n)
     error, w_exact, ref = make_errors(omega0)
@@ -127,24 +130,30 @@ def run(n=1000, dtypes=("float64", "float32"), n_python=10, quick=False, scaling
         tols = [1e-6, 1e-7, 1e-8, 1e-9, 1e-10, 1e-11] if dname == "float64" else [1e-4, 1e-5, 1e-6]
         if quick:
             tols = tols[1::2]
-        rows += C.lean_rows(
-            "B1",
-            scene,
-            states0,
-            ts,
-            tols,
-            dname,
-            lambda tr: error(tr.states.omega[:, -1], tr.states.quat[:, -1]),
+        rows += (
+            []
+            if large
+            else C.lean_rows(
+                "B1",
+                scene,
+                states0,
+                ts,
+                tols,
+                dname,
+                lambda tr: error(tr.states.omega[:, -1], tr.states.quat[:, -1]),
+            )
         )
         # jaxrb.simulate with a batched state (one solve, one device), its gradients
-        rows += batched_rows(scene, states0, ts, dname, error, quick)
+        rows += batched_rows(scene, states0, ts, dname, error, quick, large)
         # vmap of diffrax Dopri8 / Tsit5 through jaxrb.simulate, and plain diffrax beside it
         vmap_tols = (
             [1e-7, 1e-8, 1e-9, 5e-10, 3e-10, 1e-10, 1e-11] if dname == "float64" else [1e-5, 1e-6]
         )
         if quick:
             vmap_tols = vmap_tols[1::2]
-        for solver_name, solver in (("Dopri8", dfx.Dopri8()), ("Tsit5", dfx.Tsit5())):
+        for solver_name, solver in (
+            () if large else (("Dopri8", dfx.Dopri8()), ("Tsit5", dfx.Tsit5()))
+        ):
             fn = jax.jit(
                 jax.vmap(
                     lambda s, tol, solver=solver: jaxrb.simulate(
@@ -169,7 +178,7 @@ def run(n=1000, dtypes=("float64", "float32"), n_python=10, quick=False, scaling
                     )
                 )
             rows += plain_rows(solver_name, solver, omega0.astype(dt), ts, vmap_tols, dname, error)
-        if dname == "float64":  # the default rtol (1e-8) is for float64
+        if dname == "float64" and not large:  # the default rtol (1e-8) is for float64
             for label, fn in (
                 (
                     "vmap(jaxrb.simulate), default settings (Tsit5, tol 1e-8)",
@@ -238,6 +247,8 @@ def run(n=1000, dtypes=("float64", "float32"), n_python=10, quick=False, scaling
                 )
             )
 
+    if large:
+        return rows, []
     # scipy peers (float64, a subset of bodies, per-body Python loop)
     rows += scipy_rows(omega0[:n_python], w_exact[:n_python], ref[:n_python], quick)
     rows += mujoco_rows(omega0, error, quick)
@@ -245,6 +256,7 @@ def run(n=1000, dtypes=("float64", "float32"), n_python=10, quick=False, scaling
     return rows, scale_pts
 
 
+LARGE_CHECKPOINTS = 100  # reverse-mode checkpoints of the batched solve with `large`
 GRAD_TOL = 5e-10  # the batched Dopri8's cheapest tolerance with error <= 1e-8 here
 
 
@@ -255,7 +267,7 @@ def _observable(weights, traj):
     )
 
 
-def batched_rows(scene, states0, ts, dname, error, quick):
+def batched_rows(scene, states0, ts, dname, error, quick, large=False):
     """`jaxrb.simulate` on the batched state (one diffrax solve, batch-wide step control) over
     tolerances with Dopri8 and Tsit5; in float64 also the reverse-mode gradient of a weighted
     sum of all final states w.r.t. all N initial omegas (`jax.grad`, diffrax's default
@@ -331,8 +343,20 @@ def batched_rows(scene, states0, ts, dname, error, quick):
     tangent = jax.random.normal(jax.random.key(1), states0.omega.shape, dt)
     for label, fn, args in (
         (
-            "jaxrb.simulate, batched, Dopri8: reverse gradient wrt all N omega0 (jax.grad)",
-            jax.jit(jax.grad(lambda w: _observable(weights, run(w)))),
+            "jaxrb.simulate, batched, Dopri8: reverse gradient wrt all N omega0 (jax.grad)"
+            + (f", {LARGE_CHECKPOINTS} checkpoints" if large else ""),
+            # diffrax's default checkpoints for max_steps 1e5 hold ~1300 copies of the
+            # batch: 73 GiB at N = 1e6; a fixed number of checkpoints fits
+            jax.jit(
+                jax.grad(
+                    lambda w: _observable(
+                        weights,
+                        run(
+                            w, dfx.RecursiveCheckpointAdjoint(LARGE_CHECKPOINTS) if large else None
+                        ),
+                    )
+                )
+            ),
             (states0.omega,),
         ),
         (
@@ -350,9 +374,13 @@ def batched_rows(scene, states0, ts, dname, error, quick):
             (states0.omega,),
         ),
     ):
-        if quick and "vmap" in label:
+        if (quick or large) and "vmap" in label:
             continue
-        first, best, _ = C.time_jax(fn, *args)
+        try:
+            first, best, _ = C.time_jax(fn, *args)
+        except jax.errors.JaxRuntimeError as e:  # out of device memory at large N
+            print(f"{label}: {str(e)[:200]}")
+            continue
         rows.append(
             C.Row(
                 "B1",
@@ -676,9 +704,15 @@ def main(argv=None):
     p.add_argument("--out", default=None, help="directory for the markdown table and PNGs")
     p.add_argument("--quick", action="store_true", help="fewer settings (smoke run)")
     p.add_argument("--no-scaling", action="store_true")
+    p.add_argument(
+        "--large",
+        action="store_true",
+        help="only the array methods (batched solve and its gradients, RK4, exact flow): "
+        "for N = 1e5 to 1e6 on a GPU",
+    )
     a = p.parse_args(argv)
     dtypes = ("float64", "float32") if a.dtype == "both" else (a.dtype,)
-    rows, pts = run(a.n, dtypes, quick=a.quick, scaling=not a.no_scaling)
+    rows, pts = run(a.n, dtypes, quick=a.quick, scaling=not a.no_scaling, large=a.large)
     dev = C.device_name()
     table = C.markdown_table(rows, dev)
     summary = targets(rows)
