@@ -135,7 +135,9 @@ def quat_to_euler(q: Quat, seq: str) -> Vec3:
 
     - `q`: quaternion(s) (e0, e1, e2, e3), scalar first, mapping body to world, shape
       (..., 4), of any finite non-zero norm (it is rescaled first). A zero quaternion is no
-      attitude: a ValueError when concrete, NaN angles under jit.
+      attitude: a ValueError when concrete, NaN angles under jit. (XLA on a CPU flushes
+      subnormal numbers, below 2.2e-308 in float64, to zero: a component that small is
+      read as 0 before the rescaling.)
     - `seq`: one of `jaxrb.EULER_SEQUENCES` ("121", ..., "323").
 
     **Returns:**

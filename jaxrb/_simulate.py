@@ -11,11 +11,25 @@ import jax.numpy as jnp
 import optimistix as optx
 
 from ._batched import batch_rms_norm, check_batch_inputs, simulate_batched
-from ._checks import all_met, as_float_array
+from ._checks import as_float_array
 from ._coordinates import FullState, coordinates_for
-from ._inputs import check_concrete_inputs, check_solver_settings, input_result, safe_times
+from ._inputs import (
+    check_concrete_inputs,
+    default_controller,
+    input_result,
+    safe_times,
+    save_times,
+    solver_settings_ok,
+)
 from ._results import RESULTS
-from ._solve import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, default_solver, solve
+from ._solve import (
+    DEFAULT_ATOL,
+    DEFAULT_MAX_STEPS,
+    DEFAULT_RTOL,
+    checks_without_host_callbacks,
+    default_solver,
+    solve,
+)
 from ._state import State
 from ._trajectory import Trajectory
 from .contact import ContactOptions
@@ -131,11 +145,7 @@ def simulate(
     kinematics preserve |q| up to the solver's error, and saved quaternions are normalised;
     `Trajectory.quat_norm_drift` reports the drift the solver allowed.
     """
-    ts = jnp.asarray(ts)
-    if ts.ndim != 1 or ts.shape[0] < 1:
-        raise ValueError(f"ts must be a 1-D array of save times, got shape {ts.shape}")
-    if not jnp.issubdtype(ts.dtype, jnp.floating):
-        ts = ts.astype(float)
+    ts = save_times(ts)
     if not isinstance(state0, State):
         raise TypeError(f"state0 must be a jaxrb.State, got {type(state0).__name__}")
     n_batch = _batch_size(state0)
@@ -143,31 +153,17 @@ def simulate(
         if n_batch is not None:
             check_batch_inputs(state0)
         check_concrete_inputs(state0, ts)
-    settings_ok = all_met(
-        check_solver_settings(
-            rtol if stepsize_controller is None else 1.0,
-            atol if stepsize_controller is None else 1.0,
-            dt0,
-            max_steps,
-            throw,
-        )
-    )
+    settings_ok = solver_settings_ok(rtol, atol, dt0, max_steps, throw, stepsize_controller)
     if solver is None:
         free = scene.floor is None and stepsize_controller is None
         solver = default_solver(rtol, n_batch is not None) if free else dfx.Tsit5()
-    if stepsize_controller is None:
-        # tolerances as arrays, so that new values do not trigger a recompilation
-        stepsize_controller = dfx.PIDController(rtol=jnp.asarray(rtol), atol=jnp.asarray(atol))
+    stepsize_controller = default_controller(stepsize_controller, rtol, atol)
     if dt0 is not None:
         dt0 = jnp.asarray(dt0, ts.dtype)
     if adjoint is None:
         adjoint = dfx.RecursiveCheckpointAdjoint()
     if scene.floor is not None:
-        if contact is None:
-            shortcuts = dict(max_impacts=max_impacts, rest_speed=rest_speed)
-            contact = ContactOptions(**{k: v for k, v in shortcuts.items() if v is not None})
-        elif max_impacts is not None or rest_speed is not None:
-            raise ValueError("give max_impacts and rest_speed inside `contact`, not beside it")
+        contact = ContactOptions.from_shortcuts(contact, max_impacts, rest_speed)
 
         def one(s):
             return simulate_contact(
@@ -193,18 +189,19 @@ def simulate(
     else:
         core = simulate_batched
         stepsize_controller = batch_controller(stepsize_controller)
-    traj = core(
-        scene,
-        state0,
-        ts,
-        solver,
-        stepsize_controller,
-        adjoint,
-        progress_meter,
-        dt0,
-        max_steps,
-        settings_ok,
-    )
+    with checks_without_host_callbacks():  # also what JAX derives from the program here
+        traj = core(
+            scene,
+            state0,
+            ts,
+            solver,
+            stepsize_controller,
+            adjoint,
+            progress_meter,
+            dt0,
+            max_steps,
+            settings_ok,
+        )
     if throw:  # outside the compiled function: throw=True/False share one compilation
         traj = traj.result.error_if(traj, traj.result != RESULTS.successful)
     return traj

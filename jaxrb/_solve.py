@@ -35,7 +35,9 @@ def default_solver(rtol, batch: bool = False) -> dfx.AbstractSolver:
 def checks_without_host_callbacks():
     """While tracing a `diffrax.diffeqsolve` of jaxrb's: its checks of the save times (sorted,
     between t0 and t1) and of dt0, which jaxrb makes itself before the solve (and flags per
-    trajectory), return NaN where they fail instead of raising through a host callback. JAX's
+    trajectory), return NaN where they fail instead of raising through a host callback; so
+    does the check of the linear solve in the derivative of an event time (singular only
+    where the event condition grazes zero, where the event time has no derivative). JAX's
     persistent compilation cache keeps no program with a host callback: without this, no
     compiled simulation could be cached. Only equinox's default `EQX_ON_ERROR=raise` is
     changed; any other setting (e.g. `breakpoint` for debugging) is left as it is. (equinox

@@ -37,6 +37,14 @@ from ._step_limit import gap_step_limit, limited, step_limit_of
 from ._transition import at_event
 
 
+def traced_once(fn):
+    """`fn` (pure) as a function whose trace is kept: while one program is traced, diffrax
+    calls a segment's right-hand side, event condition and step limit many times with the
+    same argument shapes (every stage of a step, its probes of the step's shapes, the root
+    find); each later call reuses the first one's jaxpr instead of tracing `fn` again."""
+    return eqx.filter_jit(fn)
+
+
 def _sliding(mode):
     held_still = mode.stick[0] & ((mode.kind != PAIR) | mode.stick[1])
     return (mode.kind != FLIGHT) & ~held_still
@@ -99,20 +107,24 @@ def simulate_contact(
                 "floor plane"
             )
     kind = "lax" if isinstance(adjoint, dfx.ForwardMode) else "checkpointed"
-    traj = _simulate_contact(
-        scene,
-        state0,
-        ts,
-        solver,
-        stepsize_controller,
-        adjoint,
-        dt0,
-        max_steps,
-        options,
-        tol,
-        kind,
-        settings_ok,
-    )
+    # also around the call: under jax.grad / jacfwd JAX differentiates the compiled
+    # program's jaxpr here, tracing the derivative of each event time's root find (a linear
+    # solve with its own check) only now
+    with checks_without_host_callbacks():
+        traj = _simulate_contact(
+            scene,
+            state0,
+            ts,
+            solver,
+            stepsize_controller,
+            adjoint,
+            dt0,
+            max_steps,
+            options,
+            tol,
+            kind,
+            settings_ok,
+        )
     if throw:  # outside the compiled program: throw=True and False share one compilation
         traj = traj.result.error_if(traj, traj.result != RESULTS.successful)
     return traj
@@ -264,7 +276,11 @@ class ContactProgram(eqx.Module):
         t0 = jnp.where(done, t_end, t0)
         with checks_without_host_callbacks():
             sol = dfx.diffeqsolve(
-                dfx.ODETerm(lambda t, y, args: mode_rates(t, y, args.mode, args.scene, model, tol)),
+                dfx.ODETerm(
+                    traced_once(
+                        lambda t, y, args: mode_rates(t, y, args.mode, args.scene, model, tol)
+                    )
+                ),
                 self.solver,
                 t0=t0,
                 t1=t_end,
@@ -355,11 +371,15 @@ def _event(model, tol):
     """A segment's event: the first zero of the minimum of its mode's conditions (shifted
     by the offsets at its start)."""
 
-    def condition(t, y, args, **kwargs):
+    @traced_once
+    def smallest(t, y, args):
         sol = solve_mode(t, unit_state(y), args.mode, args.scene, model, tol)
         values = conditions(sol, args.mode, model, args.scene, tol) + args.offsets
         # in JAX's default float dtype: diffrax compares it with a Python float internally
         return jnp.min(values).astype(jnp.result_type(float))
+
+    def condition(t, y, args, **kwargs):
+        return smallest(t, y, args)
 
     root_finder = TimeBisection(
         rtol=tol.event, atol=tol.event, flip="detect", expand_if_necessary=True
@@ -374,7 +394,9 @@ def contact_program(
     model = contact_model(scene.body.shape)
     controller = limited(
         stepsize_controller,
-        lambda t, y, args: gap_step_limit(t, y, args.mode, args.offsets, args.scene, model, tol),
+        traced_once(
+            lambda t, y, args: gap_step_limit(t, y, args.mode, args.offsets, args.scene, model, tol)
+        ),
     )
     return ContactProgram(
         model, solver, controller, adjoint, dt0, max_steps, options, tol, settings_ok

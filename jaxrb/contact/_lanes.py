@@ -15,8 +15,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._checks import all_met, as_float_array
-from .._inputs import check_solver_settings
+from .._checks import as_float_array
+from .._inputs import default_controller, save_times, solver_settings_ok
 from .._state import State
 from ._driver import check_contact_scene, contact_program
 from ._options import ContactOptions
@@ -67,11 +67,7 @@ def simulate_throws(
     """
     if scene.floor is None:
         raise ValueError("simulate_throws needs a scene with a floor; use jaxrb.simulate")
-    ts = jnp.asarray(ts)
-    if ts.ndim != 1 or ts.shape[0] < 1:
-        raise ValueError(f"ts must be a 1-D array of save times, got shape {ts.shape}")
-    if not jnp.issubdtype(ts.dtype, jnp.floating):
-        ts = ts.astype(float)
+    ts = save_times(ts)
     if not isinstance(states0, State):
         raise TypeError(f"states0 must be a jaxrb.State, got {type(states0).__name__}")
     for name, k in (("pos", 3), ("quat", 4), ("vel", 3), ("omega", 3)):
@@ -92,26 +88,13 @@ def simulate_throws(
     if lanes < 1:
         raise ValueError(f"lanes must be >= 1, got {lanes}")
     lanes = min(lanes, n)
-    if contact is None:
-        shortcuts = dict(max_impacts=max_impacts, rest_speed=rest_speed)
-        contact = ContactOptions(**{k: v for k, v in shortcuts.items() if v is not None})
-    elif max_impacts is not None or rest_speed is not None:
-        raise ValueError("give max_impacts and rest_speed inside `contact`, not beside it")
+    contact = ContactOptions.from_shortcuts(contact, max_impacts, rest_speed)
     one_scene = jax.tree.map(lambda x: x[0], scene) if batched_scene else scene
     check_contact_scene(one_scene, contact)
-    settings_ok = all_met(
-        check_solver_settings(
-            rtol if stepsize_controller is None else 1.0,
-            atol if stepsize_controller is None else 1.0,
-            dt0,
-            max_steps,
-            False,
-        )
-    )
+    settings_ok = solver_settings_ok(rtol, atol, dt0, max_steps, False, stepsize_controller)
     if solver is None:
         solver = dfx.Tsit5()
-    if stepsize_controller is None:
-        stepsize_controller = dfx.PIDController(rtol=jnp.asarray(rtol), atol=jnp.asarray(atol))
+    stepsize_controller = default_controller(stepsize_controller, rtol, atol)
     if dt0 is not None:
         dt0 = jnp.asarray(dt0, ts.dtype)
     states0 = jax.tree.map(lambda x: jnp.asarray(x, ts.dtype), states0)

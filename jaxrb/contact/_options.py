@@ -88,6 +88,17 @@ class ContactOptions(eqx.Module):
         self.stabilisation = _positive("stabilisation", stabilisation) if stabilisation else 0.0
         self.event_tol = None if event_tol is None else _positive("event_tol", event_tol)
 
+    @classmethod
+    def from_shortcuts(cls, contact, max_impacts=None, rest_speed=None) -> "ContactOptions":
+        """`contact` (a `ContactOptions` or None) with `simulate`'s shortcut arguments: the
+        options they give when `contact` is None; a ValueError when both are given."""
+        if contact is None:
+            shortcuts = dict(max_impacts=max_impacts, rest_speed=rest_speed)
+            return cls(**{k: v for k, v in shortcuts.items() if v is not None})
+        if max_impacts is not None or rest_speed is not None:
+            raise ValueError("give max_impacts and rest_speed inside `contact`, not beside it")
+        return contact
+
     def resolved(self, dtype) -> "Tolerances":
         """The tolerances for a computation in `dtype`."""
         double = jnp.finfo(dtype).bits >= 64
