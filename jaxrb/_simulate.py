@@ -22,14 +22,7 @@ from ._inputs import (
     solver_settings_ok,
 )
 from ._results import RESULTS
-from ._solve import (
-    DEFAULT_ATOL,
-    DEFAULT_MAX_STEPS,
-    DEFAULT_RTOL,
-    checks_without_host_callbacks,
-    default_solver,
-    solve,
-)
+from ._solve import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, default_solver, solve
 from ._state import State
 from ._trajectory import Trajectory
 from .contact import ContactOptions
@@ -189,19 +182,18 @@ def simulate(
     else:
         core = simulate_batched
         stepsize_controller = batch_controller(stepsize_controller)
-    with checks_without_host_callbacks():  # also what JAX derives from the program here
-        traj = core(
-            scene,
-            state0,
-            ts,
-            solver,
-            stepsize_controller,
-            adjoint,
-            progress_meter,
-            dt0,
-            max_steps,
-            settings_ok,
-        )
+    traj = core(
+        scene,
+        state0,
+        ts,
+        solver,
+        stepsize_controller,
+        adjoint,
+        progress_meter,
+        dt0,
+        max_steps,
+        settings_ok,
+    )
     if throw:  # outside the compiled function: throw=True/False share one compilation
         traj = traj.result.error_if(traj, traj.result != RESULTS.successful)
     return traj
