@@ -30,7 +30,8 @@ the cube); for them the table adds how squarely each ends on a face and how ofte
 came up. `--shapes ball_in_bowl,ball_on_cone` throws a ball (20 mm, 50 g) the same way into a
 spherical bowl of radius 0.3 m, or onto a cone of inclination 0.3 rad (apex rounded, radius
 5 cm), both with rolling
-resistance 0.01 (the "floor" of the checks is then that surface).
+resistance 0.01 (the "floor" of the checks is then that surface); `ball_on_wheel` onto that
+cone bounded by a smooth wall of radius 0.1 m (a small roulette wheel: track and wall).
 
 Writes `contact_throws.md` (the table and the counts), `contact_throws.png` (energy above
 the floor over time, the lowest point's height, the final state) and per shape
@@ -93,11 +94,19 @@ for _sides in (4, 8, 12, 20):
 BALL = (0.05, lambda: jaxrb.Sphere(0.02))
 SHAPES["ball_in_bowl"] = (*BALL, 0.02, 4.0)
 SHAPES["ball_on_cone"] = (*BALL, 0.02 / np.cos(0.3), 4.0)
-PLURAL.update(ball_in_bowl="balls in a bowl", ball_on_cone="balls on a cone")
+# and onto a small roulette wheel: that cone bounded by a smooth wall of radius 0.1 m (the
+# ball meets track and wall, often both at once: docs/contact.md, section 11)
+SHAPES["ball_on_wheel"] = (*BALL, 0.02 / np.cos(0.3), 4.0)
+PLURAL.update(
+    ball_in_bowl="balls in a bowl", ball_on_cone="balls on a cone", ball_on_wheel="balls on a wheel"
+)
 FLOORS = {
     "ball_in_bowl": lambda e, mu: jaxrb.Bowl(e, mu, radius=0.3, rolling_resistance=0.01),
     "ball_on_cone": lambda e, mu: jaxrb.Cone(
         e, mu, inclination=0.3, rolling_resistance=0.01, tip_radius=0.05
+    ),
+    "ball_on_wheel": lambda e, mu: jaxrb.Wheel(
+        e, mu, inclination=0.3, wall_radius=0.1, rolling_resistance=0.01, tip_radius=0.05
     ),
 }
 DEFAULT_SHAPES = "die,coin"

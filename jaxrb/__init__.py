@@ -78,7 +78,7 @@ from ._shapes import (
 from ._simulate import Trajectory as Trajectory, simulate as simulate
 from ._splitting import simulate_splitting as simulate_splitting
 from ._state import State as State, make_state as make_state
-from ._surfaces import Bowl as Bowl, Cone as Cone
+from ._surfaces import Bowl as Bowl, Cone as Cone, Wheel as Wheel
 from ._sweep import grid as grid, random_draws as random_draws, sweep as sweep
 from .contact._lanes import simulate_throws as simulate_throws
 

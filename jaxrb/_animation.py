@@ -7,7 +7,7 @@ import numpy as np
 from matplotlib import animation
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-from ._surfaces import Bowl
+from ._surfaces import Bowl, Wheel
 
 
 def _box_faces(half):
@@ -85,8 +85,9 @@ def _rotations(quat) -> np.ndarray:
 
 
 def surface_mesh(surface, limits, num=25):
-    """Grids (X, Y, Z) (m, world) of a curved surface (a `Bowl` or `Cone`) over the view's
-    horizontal extent `limits` (3, 2), for a wireframe."""
+    """Grids (X, Y, Z) (m, world) of a curved surface (a `Bowl` or `Cone` over the view's
+    horizontal extent `limits` (3, 2); a `Wheel`'s track and the foot of its wall), for a
+    wireframe."""
     reach = float(np.max(np.abs(limits[:2])))
     phi = np.linspace(0.0, 2 * np.pi, 2 * num)
     if isinstance(surface, Bowl):
@@ -94,6 +95,12 @@ def surface_mesh(surface, limits, num=25):
         top = min(np.arcsin(min(reach / R, 1.0)), 0.5 * np.pi)
         theta = np.linspace(0.0, top, num)[:, None]
         rho, z = R * np.sin(theta), h + R - R * np.cos(theta)
+    elif isinstance(surface, Wheel):  # the track up to the wall, then the wall's lower part
+        R, slope = float(surface.wall_radius), np.tan(float(surface.inclination))
+        rim = float(surface.height) + slope * R
+        rho = np.concatenate([np.linspace(0.0, R, num), np.full(4, R)])[:, None]
+        wall = rim + 0.05 * R * np.arange(1, 5)
+        z = np.concatenate([float(surface.height) + slope * rho[:num, 0], wall])[:, None]
     else:
         rho = np.linspace(0.0, reach, num)[:, None]
         z = float(surface.height) + np.tan(float(surface.inclination)) * rho

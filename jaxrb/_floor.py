@@ -58,6 +58,7 @@ class Floor(eqx.Module):
     spin_resistance: jnp.ndarray
 
     curved = False  # one frame for every contact (a curved surface's depends on the ball)
+    parts = 1  # one part: every contact point has the plane's frame
 
     def __init__(
         self,

@@ -81,6 +81,7 @@ def _floor_checks(floor):
         "radius": RESULTS.invalid_surface,
         "inclination": RESULTS.invalid_surface,
         "tip_radius": RESULTS.invalid_surface,
+        "wall_radius": RESULTS.invalid_surface,
     }
     return [(jnp.all(r.ok), codes[r.field]) for r in floor.requirements()]
 

@@ -33,7 +33,8 @@ class RESULTS(dfx.RESULTS):  # pyright: ignore
     )
     invalid_surface = (
         "the curved surface's dimensions are invalid: a bowl's radius must be finite and "
-        "> 0, a cone's inclination in (0, pi/2) rad."
+        "> 0, a cone's or wheel's inclination in (0, pi/2) rad and its tip_radius >= 0, a "
+        "wheel's wall_radius finite and > its tip_radius."
     )
     invalid_tolerances = (
         "the solver settings are invalid (rtol and atol must be finite and >= 0, not both 0; "

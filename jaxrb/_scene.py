@@ -13,7 +13,7 @@ class Scene(eqx.Module):
     """What is simulated: a `RigidBody`, a tuple of forces, an optional floor or joint.
 
     The floor is the surface the body meets: a plane (`Floor`), or for a `Sphere` the
-    inside of a `Bowl` or a `Cone`.
+    inside of a `Bowl` or a `Cone`, or a roulette `Wheel` (track and wall).
 
     The pytree structure (which forces, which joint) is static; the parameters inside
     (mass, inertia, drag coefficients, restitution...) are differentiable array leaves.
@@ -34,6 +34,8 @@ class Scene(eqx.Module):
             if not isinstance(force, AbstractForce):
                 raise TypeError(f"forces[{i}] is not a force model: {type(force).__name__}")
         if self.floor is not None and not isinstance(self.floor, (Floor, AbstractCurvedSurface)):
-            raise TypeError(f"floor must be a Floor, Bowl or Cone, got {type(self.floor).__name__}")
+            raise TypeError(
+                f"floor must be a Floor, Bowl, Cone or Wheel, got {type(self.floor).__name__}"
+            )
         if self.floor is not None and self.joint is not None:
             raise ValueError("a scene may have a floor or a joint, not both")

@@ -18,6 +18,7 @@ EXAMPLES = {
     "heavy_top": "heavy_top.toml",
     "ball_in_bowl": "ball_in_bowl.toml",
     "thick_coin": "thick_coin.toml",
+    "roulette": "roulette.toml",
 }
 
 

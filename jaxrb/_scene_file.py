@@ -24,9 +24,11 @@ The format is documented, field by field, in the annotated example shipped with 
 - `[floor]`: `restitution` in [0, 1], `friction` >= 0, `height` (m), and `type`: "plane"
   (the default; optionally `normal`: a tilted plane through (0, 0, height), its normal,
   world frame, default [0, 0, 1]), "bowl" (`radius`, m: the inside of a sphere whose
-  lowest point is (0, 0, height)) or "cone" (`inclination_deg` in (0, 90): the inside of
+  lowest point is (0, 0, height)), "cone" (`inclination_deg` in (0, 90): the inside of
   an upright cone with its apex at (0, 0, height); optional `tip_radius`, m, rounds the
-  apex); a bowl or cone meets only a sphere.
+  apex) or "wheel" (a roulette wheel's stator: that cone as its track, bounded by a smooth
+  vertical wall of radius `wall_radius`, m, about the z axis); a bowl, cone or wheel meets
+  only a sphere.
   Optionally `rolling_resistance` and `spin_resistance` >= 0 (a sphere's; see `Floor`).
 - `[joint]`: `type` = "pivot" or "hinge", `point` (body frame, m), `axis` (hinge). A joint
   fixes part of the initial motion: `[initial].vel`, if given, must equal the velocity the
@@ -641,6 +643,7 @@ _FLOOR_KEYS = {
     "plane": ("normal",),
     "bowl": ("radius",),
     "cone": ("inclination_deg", "tip_radius"),
+    "wheel": ("inclination_deg", "tip_radius", "wall_radius"),
 }
 
 
@@ -648,14 +651,14 @@ def _floor(root: _Table):
     import jaxrb
 
     common = ("type", "restitution", "friction", "rolling_resistance", "spin_resistance")
-    known = (*common, "height", *sum(_FLOOR_KEYS.values(), ()))
+    known = (*common, "height", *dict.fromkeys(sum(_FLOOR_KEYS.values(), ())))
     floor = root.table("floor", known, default=None)
     if floor is None:
         return None
     kind = floor.string("type", "plane", choices=tuple(_FLOOR_KEYS))
     for other, keys in _FLOOR_KEYS.items():
         for key in keys:
-            if other != kind and floor.has(key):
+            if key not in _FLOOR_KEYS[kind] and floor.has(key):
                 floor.fail(key, f"belongs to a floor of type {other!r}, not {kind!r}")
     contact = (
         floor.number("restitution", lo=0.0, hi=1.0),
@@ -671,19 +674,20 @@ def _floor(root: _Table):
         return floor.model(
             "radius", jaxrb.Bowl, *contact, radius=radius, height=height, **resistance
         )
-    if kind == "cone":
+    if kind in ("cone", "wheel"):
         inclination = floor.number("inclination_deg", lo=0.0, hi=90.0)
         if not 0.0 < inclination < 90.0:
             floor.fail("inclination_deg", f"must be in (0, 90) degrees, got {inclination:g}")
-        return floor.model(
-            "inclination_deg",
-            jaxrb.Cone,
-            *contact,
+        track = dict(
             inclination=math.radians(inclination),
             height=height,
             tip_radius=floor.number("tip_radius", 0.0, nonnegative=True),
             **resistance,
         )
+        if kind == "wheel":
+            wall = floor.number("wall_radius", positive=True)
+            return floor.model("wall_radius", jaxrb.Wheel, *contact, wall_radius=wall, **track)
+        return floor.model("inclination_deg", jaxrb.Cone, *contact, **track)
     normal = floor.vector("normal", default=(0.0, 0.0, 1.0))
     if not np.any(normal):
         floor.fail("normal", "must be a non-zero direction, got [0, 0, 0]")

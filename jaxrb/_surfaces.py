@@ -1,5 +1,6 @@
-"""Curved surfaces a ball rolls, slides and bounces on: the inside of a spherical bowl and
-of an upright cone (a funnel, as a roulette wheel's inclined track).
+"""Curved surfaces a ball rolls, slides and bounces on: the inside of a spherical bowl, of
+an upright cone (a funnel, as a roulette wheel's inclined track), and a roulette wheel's
+stator (that track bounded by its outer wall).
 
 A surface gives, for a point x (world, m), its signed distance above the surface `gap(x)`
 (negative below it) and, for a ball centred at x, the frame of its contact: the unit normal
@@ -7,6 +8,10 @@ n = grad gap (pointing out of the surface into the space the ball moves in) and 
 basis t1, t2 with t1 x t2 = n (`frame_at`). The contact engine evaluates the frame at the
 ball's centre and differentiates it along the centre's velocity, so only a `Sphere` meets a
 curved surface; any shape meets a plane (`Floor`).
+
+A surface of several parts (`Wheel`: track and wall) gives each part's gap and frame
+(`part_gaps`, `part_frames`): a ball then has one contact point per part, and touching two
+parts at once is a two-point contact (docs/contact.md, section 11).
 """
 
 import equinox as eqx
@@ -38,6 +43,7 @@ class AbstractCurvedSurface(eqx.Module):
     spin_resistance: eqx.AbstractVar[jnp.ndarray]
 
     curved = True  # the contact frame depends on where the ball is
+    parts = 1  # the parts a ball can touch at once, each with its own frame (`Wheel`: 2)
 
     def __check_init__(self):
         raise_unmet(type(self).__name__, self.requirements())
@@ -220,3 +226,111 @@ class Cone(AbstractCurvedSurface):
         n = jnp.where(on_tip, -u / _safe_norm(u), -jnp.sin(d) * e_rho + jnp.cos(d) * e_z)
         e_phi = jnp.cross(e_z, e_rho)
         return n, jnp.cross(e_phi, n), e_phi
+
+
+class Wheel(AbstractCurvedSurface):
+    """A roulette wheel's stator, for a ball: the inclined track, the inside of an upright
+    cone about the world z axis (as `Cone`: apex at (0, 0, `height`), rising outwards at
+    `inclination`, rad, apex rounded by `tip_radius`), bounded by the outer wall, the inside
+    of the vertical cylinder of radius `wall_radius` (m) about the same axis.
+
+    Part 0 is the track, part 1 the wall: a ball has one contact point on each, and rolls
+    or slides on the track, presses against the wall, or both at once (a two-point
+    contact). The wall's frame at azimuth phi: n = -e_rho (towards the axis), t1 = e_z,
+    t2 = e_phi.
+
+    The wall is smooth: it pushes along its normal only, and `restitution` applies at both
+    parts while `friction`, `rolling_resistance` and `spin_resistance` are the track's. (A
+    rigid ball held by friction at both contacts of a groove has statically indeterminate
+    forces: the pair of internal forces along the line through the two contacts changes
+    both normal forces, so rigid contact cannot say when it leaves the wall.)
+
+    A ball of radius r rolling on the track against the wall (its centre at rho = wall_radius
+    - r) without spin about the track's normal leaves the wall when its centre's speed
+    falls to v^2 = (5/7) g rho tan(inclination) (docs/contact.md, section 11).
+    """
+
+    restitution: jnp.ndarray
+    friction: jnp.ndarray
+    rolling_resistance: jnp.ndarray
+    spin_resistance: jnp.ndarray
+    inclination: jnp.ndarray
+    height: jnp.ndarray
+    tip_radius: jnp.ndarray
+    wall_radius: jnp.ndarray
+
+    parts = 2
+
+    def __init__(
+        self,
+        restitution,
+        friction=0.0,
+        inclination=0.3,
+        wall_radius=0.4,
+        height=0.0,
+        rolling_resistance=0.0,
+        spin_resistance=0.0,
+        tip_radius=0.0,
+    ):
+        set_contact_coefficients(self, restitution, friction, rolling_resistance, spin_resistance)
+        self.inclination = jnp.asarray(inclination, dtype=float)
+        self.height = jnp.asarray(height, dtype=float)
+        self.tip_radius = jnp.asarray(tip_radius, dtype=float)
+        self.wall_radius = jnp.asarray(wall_radius, dtype=float)
+
+    def requirements(self):
+        R = self.wall_radius
+        return (
+            *self.track().requirements(),
+            Requirement(
+                "wall_radius", R, "finite and > tip_radius", finite(R) & (R > self.tip_radius)
+            ),
+        )
+
+    def track(self) -> Cone:
+        """The track alone, as a `Cone`."""
+        return Cone(
+            self.restitution,
+            self.friction,
+            self.inclination,
+            self.height,
+            self.rolling_resistance,
+            self.spin_resistance,
+            self.tip_radius,
+        )
+
+    def part_gaps(self, points, side=None):
+        """Signed distances (m) (..., 2) of world `points` (..., 3) above the track and inside
+        the wall."""
+        rho = _safe_norm(points[..., :2], axis=-1)
+        wall = self.wall_radius.astype(points.dtype) - rho
+        return jnp.stack([self.track().gap(points, side), wall], axis=-1)
+
+    def gap(self, points, side=None):
+        """Signed distance (m) of world `points` above the nearer part (the smaller gap)."""
+        return jnp.min(self.part_gaps(points, side), axis=-1)
+
+    def region(self, centre):
+        return self.track().region(centre)
+
+    def frame_at(self, centre, side=None):
+        """The track's frame (the wall's: `part_frames`)."""
+        return self.track().frame_at(centre, side)
+
+    def part_frames(self, centre, side=None):
+        """Normals n, tangents t1, t2 (each (2, 3), world) of a ball centred at `centre` on the
+        track (row 0) and on the wall (row 1)."""
+        n, t1, t2 = self.track().frame_at(centre, side)
+        e_rho, _ = self.track()._radial(centre)
+        e_z = jnp.array([0.0, 0.0, 1.0], centre.dtype)
+        e_phi = jnp.cross(e_z, e_rho)
+        return jnp.stack([n, -e_rho]), jnp.stack([t1, e_z]), jnp.stack([t2, e_phi])
+
+    def part_coefficients(self):
+        """Friction, rolling and spin resistance of each part (2,): the wall's are zero."""
+        zero = jnp.zeros_like(self.friction)
+        return (
+            jnp.stack([self.friction, zero]),
+            jnp.stack([self.rolling_resistance, zero]),
+            jnp.stack([self.spin_resistance, zero]),
+        )

@@ -13,6 +13,7 @@ import equinox as eqx
 import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._checks import is_concrete
 from .._inputs import input_result, safe_times
@@ -56,7 +57,12 @@ def check_contact_scene(scene, options) -> None:
         raise ValueError(
             "a scene with a floor needs a body shape (Sphere, Box or Cylinder) for contact"
         )
-    contact_model(scene.body.shape)  # raises for a shape with no contact model
+    if scene.floor.curved and not isinstance(scene.body.shape, Sphere):
+        raise ValueError(
+            f"a {type(scene.floor).__name__} meets only a Sphere (the body is a "
+            f"{type(scene.body.shape).__name__}); any shape meets a Floor"
+        )
+    contact_model(scene.body.shape, scene.floor.parts)  # raises for a shape with none
     resists = [scene.floor.rolling_resistance, scene.floor.spin_resistance]
     if not isinstance(scene.body.shape, Sphere) and any(
         is_concrete(x) and float(x) != 0.0 for x in resists
@@ -66,10 +72,17 @@ def check_contact_scene(scene, options) -> None:
             f"{type(scene.body.shape).__name__}: leave the floor's rolling_resistance and "
             "spin_resistance at 0"
         )
-    if scene.floor.curved and not isinstance(scene.body.shape, Sphere):
+    friction = scene.floor.friction
+    if all(is_concrete(x) for x in (friction, *resists)):
+        resisting = (np.asarray(resists[0]) != 0) | (np.asarray(resists[1]) != 0)
+        smooth = np.any((np.asarray(friction) == 0) & resisting)
+    else:
+        smooth = False
+    if smooth:
         raise ValueError(
-            f"a {type(scene.floor).__name__} meets only a Sphere (the body is a "
-            f"{type(scene.body.shape).__name__}); any shape meets a Floor"
+            "rolling and spin resistance need friction: with the floor's friction 0 nothing "
+            "ties the ball's spin to its motion (and the resisting couple's fade near rest is "
+            "stiff); give friction > 0 or leave rolling_resistance and spin_resistance at 0"
         )
     if not isinstance(options, ContactOptions):
         raise TypeError(f"options must be a ContactOptions, got {type(options).__name__}")
@@ -391,7 +404,7 @@ def contact_program(
     scene, solver, stepsize_controller, adjoint, dt0, max_steps, options, tol, settings_ok
 ) -> ContactProgram:
     """The `ContactProgram` of `scene`'s shape with these solver settings."""
-    model = contact_model(scene.body.shape)
+    model = contact_model(scene.body.shape, scene.floor.parts)
     controller = limited(
         stepsize_controller,
         traced_once(

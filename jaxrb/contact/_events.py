@@ -29,7 +29,7 @@ import numpy as np
 import optimistix as optx
 
 from .._quaternion import _safe_norm
-from ._modes import FACE, PAIR, POINT, Solution, active_points
+from ._modes import FACE, PAIR, POINT, Solution, active_points, point_coefficients
 
 NORMAL_A, NORMAL_B, CONE_A, CONE_B, AXIAL, SLIP_A, SLIP_B, COP, JUNCTION = range(9)
 NUM_FORCE_CONDITIONS = 9
@@ -44,25 +44,28 @@ def _sqrt_pos(x):
 
 def force_margins(lam, rows, mode, model, geom, mu) -> jax.Array:
     """The 8 force conditions of `mode` (module docstring) from its multipliers per unit
-    mass `lam` (6,) (forces: m/s^2; impulses: m/s), with the slip entries left unused."""
+    mass `lam` (6,) (forces: m/s^2; impulses: m/s), with the slip entries left unused;
+    `mu` (P,): the friction coefficient at each contact point."""
     dtype = lam.dtype
     big = jnp.asarray(UNUSED, dtype)
     kind, stick_a, stick_b = mode.kind, mode.stick[0], mode.stick[1]
+    mu_a, mu_b = mu[mode.a], mu[mode.b]
     is_pair, is_face = kind == PAIR, kind == FACE
     holds = (kind == POINT) | is_pair | is_face
     both = is_pair & stick_a & stick_b
-    cone_point = mu * lam[0] - _safe_norm(lam[2:4])
-    cone_face = mu * lam[0] - _safe_norm(jnp.stack([lam[3], lam[4], lam[5] / rows.rho]))
+    cone_point = mu_a * lam[0] - _safe_norm(lam[2:4])
+    cone_face = mu_a * lam[0] - _safe_norm(jnp.stack([lam[3], lam[4], lam[5] / rows.rho]))
     cone_a = jnp.where(
-        is_face, cone_face, jnp.where(both, mu * lam[0] - jnp.abs(lam[2]), cone_point)
+        is_face, cone_face, jnp.where(both, mu_a * lam[0] - jnp.abs(lam[2]), cone_point)
     )
-    cone_b = jnp.where(both, mu * lam[1] - jnp.abs(lam[4]), mu * lam[1] - _safe_norm(lam[4:6]))
+    cone_b = jnp.where(both, mu_b * lam[1] - jnp.abs(lam[4]), mu_b * lam[1] - _safe_norm(lam[4:6]))
     axial = (
-        _sqrt_pos((mu * lam[0]) ** 2 - lam[2] ** 2)
-        + _sqrt_pos((mu * lam[1]) ** 2 - lam[4] ** 2)
+        _sqrt_pos((mu_a * lam[0]) ** 2 - lam[2] ** 2)
+        + _sqrt_pos((mu_b * lam[1]) ** 2 - lam[4] ** 2)
         - jnp.abs(lam[3])
     )
-    couple_body = geom.R.T @ (lam[1] * geom.t1 + lam[2] * geom.t2)
+    _, t1, t2 = geom.frame_of(0)  # a face meets a plane: one frame
+    couple_body = geom.R.T @ (lam[1] * t1 + lam[2] * t2)
     cop = model.cop_margin(mode.face, lam[0], couple_body) / rows.rho
     return jnp.stack(
         [
@@ -85,7 +88,8 @@ def conditions(sol: Solution, mode, model, scene, tol) -> jax.Array:
     rows, geom = sol.rows, sol.geom
     threshold = jnp.where(jnp.asarray(model.flat_points), tol.flat, 0.0).astype(dtype)
     gaps = jnp.where(active_points(model, mode), big, geom.gap - threshold)
-    force = force_margins(sol.lam / scene.body.mass, rows, mode, model, geom, scene.floor.friction)
+    mu, _, _ = point_coefficients(scene, model)
+    force = force_margins(sol.lam / scene.body.mass, rows, mode, model, geom, mu)
     kind = mode.kind
     holds = (kind == POINT) | (kind == PAIR) | (kind == FACE)
     # a slide ends when its slip has stopped: one that started from rest when its slip,

@@ -35,6 +35,8 @@ class AbstractContactModel(eqx.Module):
       highest rim point): their gap is compared with the flatness tolerance, not with 0.
     - `pairs`: (E, 2) point indices of the edges / lines (PAIR modes).
     - `face_points`: (F, K) point indices of each face (all touch when the face lies flat).
+    - `smooth_points`: indices of the points that touch a frictionless part of the surface
+      (a roulette wheel's wall): they slide, never stick.
     """
 
     num_points: int = eqx.field(static=True)
@@ -42,11 +44,13 @@ class AbstractContactModel(eqx.Module):
     flat_points: tuple = eqx.field(static=True)
     pairs: tuple = eqx.field(static=True)
     face_points: tuple = eqx.field(static=True)
+    smooth_points: tuple = eqx.field(static=True)
 
     @abc.abstractmethod
     def points(self, down, seed):
         """Body-frame contact points (P, 3) at the attitude where the floor normal is `down`
-        in the body frame; `seed` (3,) is the body-frame direction used for a rim's lowest
+        in the body frame (a ball on a surface of several parts: `down` (P, 3), one normal
+        per part); `seed` (3,) is the body-frame direction used for a rim's lowest
         point when its cap lies flat (where that point is not unique)."""
 
     def impact_points(self, down, seed):
@@ -83,22 +87,25 @@ class AbstractContactModel(eqx.Module):
 
 
 class SphereContact(AbstractContactModel):
-    """A ball: one contact point, its lowest point offset - radius d."""
+    """A ball: one contact point per part of the surface (`parts`), each the ball's point
+    offset - radius d_i against that part's normal d_i; on a surface of two parts (a
+    roulette wheel's track and wall) the two points also make a pair, the second smooth."""
 
     radius: jnp.ndarray
     offset: jnp.ndarray
 
-    def __init__(self, shape: Sphere):
+    def __init__(self, shape: Sphere, parts: int = 1):
         self.radius = shape.radius
         self.offset = shape.offset
-        self.num_points = 1
-        self.point_features = (0,)
-        self.flat_points = (False,)
-        self.pairs = ()
+        self.num_points = parts
+        self.point_features = tuple(range(parts))
+        self.flat_points = (False,) * parts
+        self.pairs = ((0, 1),) if parts == 2 else ()
         self.face_points = ()
+        self.smooth_points = (1,) if parts == 2 else ()
 
     def points(self, down, seed):
-        return (self.offset - self.radius * down)[None, :]
+        return jnp.broadcast_to(self.offset - self.radius * down, (self.num_points, 3))
 
     def face_frame(self):
         z = jnp.zeros((0, 3), self.radius.dtype)
@@ -187,6 +194,7 @@ class BoxContact(CornerContact):
         self.flat_points = (False,) * 8
         self.pairs = _BOX_EDGES
         self.face_points = _BOX_FACES
+        self.smooth_points = ()
         self.corners = jnp.asarray(_BOX_SIGNS, a.dtype) * a + shape.offset
         eye = jnp.eye(3, dtype=a.dtype)
         self.normals = jnp.stack([sign * eye[axis] for axis, sign in _BOX_FACE_AXES])
@@ -231,6 +239,7 @@ class CylinderContact(AbstractContactModel):
         self.flat_points = (False, False, True, True)
         self.pairs = ((0, 1),)
         self.face_points = ((0, 2), (1, 3))
+        self.smooth_points = ()
 
     def rim_direction(self, down, seed):
         """Unit body-frame direction (x, y, 0) of the highest rim point: d_xy / |d_xy|."""
@@ -314,6 +323,7 @@ class PolyhedronContact(CornerContact):
         self.flat_points = (False,) * self.num_points
         self.pairs = shape.edges
         self.face_points = faces
+        self.smooth_points = ()
         self.corners = v + shape.offset
         self.normals = shape.face_normals()
         K = max(len(f) for f in faces)
@@ -353,8 +363,9 @@ CONTACT_MODELS = {
 """The contact model of each shape class (`contact_model` looks a shape up here)."""
 
 
-def contact_model(shape: AbstractShape) -> AbstractContactModel:
-    """The contact model of `shape` from the table; an unknown shape is an error."""
+def contact_model(shape: AbstractShape, parts: int = 1) -> AbstractContactModel:
+    """The contact model of `shape` from the table, against a surface of `parts` parts (only
+    a ball meets a surface of several); an unknown shape is an error."""
     try:
         build = CONTACT_MODELS[type(shape)]
     except KeyError:
@@ -363,4 +374,8 @@ def contact_model(shape: AbstractShape) -> AbstractContactModel:
             f"no contact model for shape {type(shape).__name__} (floor contact is modelled "
             f"for {known})"
         ) from None
+    if parts != 1:
+        if build is not SphereContact:
+            raise TypeError(f"a surface of {parts} parts meets only a Sphere")
+        return SphereContact(shape, parts)
     return build(shape)

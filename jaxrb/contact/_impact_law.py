@@ -2,8 +2,9 @@
 (docs/contact.md, section 5).
 
 Unknowns: the impulse Lambda_i = (Lambda_n, Lambda_t) at each touching point i (N s, in the
-floor's frame n, t1, t2). With the Delassus operator W = J M^-1 J^T and the contact
-velocities before, c = J u-, the velocities after are c+ = c + W Lambda, and per point:
+frame n, t1, t2 of the surface there: on a surface of several parts, each point's own).
+With the Delassus operator W = J M^-1 J^T and the contact velocities before, c = J u-, the
+velocities after are c+ = c + W Lambda, and per point:
 
 - Newton: Lambda_n >= 0, c+_n - target >= 0, complementary, with target = -e min(c_n, 0)
   (a point that approached leaves at e times its approach speed unless the others lift it; a
@@ -58,11 +59,11 @@ class ImpactOutcome(eqx.Module):
 
 
 def _jacobians(body, R, r, n, t1, t2):
-    """Per-point contact Jacobians J (S, 3, 6) (rows n, t1, t2), M^-1 J^T rows, and W."""
+    """Per-point contact Jacobians J (S, 3, 6) (rows n, t1, t2: each (S, 3), the points'
+    frames), M^-1 J^T rows, and W."""
     inv_iw = R @ inverse3(body.inertia_matrix) @ R.T
-    frame = jnp.stack([n, t1, t2])
-    lin = jnp.broadcast_to(frame, r.shape[:1] + (3, 3))
-    ang = cross(r[:, None, :], frame[None, :, :])  # r x d
+    lin = jnp.stack([n, t1, t2], axis=1)  # (S, 3, 3)
+    ang = cross(r[:, None, :], lin)  # r x d
     J = jnp.concatenate([lin, ang], axis=-1)
     minv = jnp.concatenate([lin / body.mass, ang @ inv_iw.T], axis=-1)
     W = jnp.einsum("iad,jbd->iajb", J, minv)
@@ -70,7 +71,8 @@ def _jacobians(body, R, r, n, t1, t2):
 
 
 def _gauss_seidel(W, c, target, present, mu, bilateral, lam0, sweeps):
-    """Projected Gauss-Seidel for the impulses (S, 3) (normal, t1, t2) per slot, from lam0."""
+    """Projected Gauss-Seidel for the impulses (S, 3) (normal, t1, t2) per slot, from lam0;
+    `mu` (S,): each slot's friction coefficient."""
     S = c.shape[0]
     tiny = jnp.finfo(c.dtype).tiny
     diag = jnp.einsum("iaia->ia", W)
@@ -88,7 +90,7 @@ def _gauss_seidel(W, c, target, present, mu, bilateral, lam0, sweeps):
             vt = v[1:] + W[i, 1:, i, 0] * (ln - lam[i, 0])
             trial = lam[i, 1:] - vt / wt[i]
             size = _safe_norm(trial)
-            bound = mu * jnp.abs(ln)
+            bound = mu[i] * jnp.abs(ln)
             shrink = jnp.where(size > bound, bound / jnp.where(size > 0, size, 1.0), 1.0)
             lt = jnp.where(present[i], trial * shrink, 0.0)
             lam = jnp.where((jnp.arange(S) == i)[:, None], jnp.concatenate([ln[None], lt]), lam)
@@ -125,7 +127,7 @@ def _polish(W, c, target, present, mu, bilateral, lam, margin):
 
     def solve(hats):
         ride = eye * first + jnp.concatenate(
-            [jnp.zeros((S, 1, 3), dtype), -mu * hats[:, :, None] * first], axis=1
+            [jnp.zeros((S, 1, 3), dtype), -mu[:, None, None] * hats[:, :, None] * first], axis=1
         )
         B = jnp.where(slide[:, None, None], ride, eye)
         A = jnp.einsum("iajb,jbc->iajc", W, B).reshape(3 * S, 3 * S)
@@ -194,16 +196,25 @@ def _violation(W, c, target, present, mu, bilateral, lam):
     return jnp.max(jnp.where(present[None, :], bad, 0.0))
 
 
-def solve_impacts(state, geom, points, touching, scene, tol):
+def solve_impacts(state, geom, points, touching, scene, tol, frames=None, mu=None):
     """The impact at `state` (unit quaternion) at the contact `points` (Q, 3) (world offsets
-    from the mass centre) of which `touching` (Q,) touch the floor, three ways: Newton-Coulomb,
-    frictionless, the limit of a bounce series (frictionless, holding every touching point),
-    and frictionless plastic. Returns an `ImpactOutcome` with a leading axis of `VARIANTS`."""
+    from the mass centre) of which `touching` (Q,) touch the surface, four ways:
+    Newton-Coulomb, frictionless, the limit of a bounce series (frictionless, holding every
+    touching point), and frictionless plastic. Returns an `ImpactOutcome` with a leading
+    axis of `VARIANTS`.
+
+    `frames` = (n, t1, t2), each (Q, 3), and `mu` (Q,): each point's surface frame and
+    friction coefficient (a surface of several parts); by default the frame of the
+    geometry's first point and the surface's friction, for every point."""
     body = scene.body
-    floor = scene.floor
-    e, mu = floor.restitution, floor.friction
+    e = scene.floor.restitution
     dtype = state.pos.dtype
-    n, t1, t2, R = geom.n, geom.t1, geom.t2, geom.R
+    Q = points.shape[0]
+    if frames is None:
+        frames = geom.frame_of(0)
+    frames = tuple(jnp.broadcast_to(x, (Q, 3)) for x in frames)
+    mu = jnp.broadcast_to(scene.floor.friction if mu is None else mu, (Q,))
+    (n, t1, t2), R = frames, geom.R
     # the touching points, gathered into the first slots in an order set by where they are
     # (along a fixed direction of the floor), not by how the shape numbers them: where the
     # impulses are not unique (a face on four corners, with friction) the solution the
@@ -211,12 +222,13 @@ def solve_impacts(state, geom, points, touching, scene, tol):
     # numbering too. Where more points touch than there are slots (a
     # d12's pentagon lands flat), the slots take those that approach fastest: a point left
     # out must not be one that still approaches (it would be hit again at once, unresolved)
-    where = points @ (t1 + 0.6180339887498949 * t2)
-    rate = (state.vel + cross(geom.w, points)) @ n
+    where = jnp.sum(points * (t1 + 0.6180339887498949 * t2), axis=-1)
+    rate = jnp.sum((state.vel + cross(geom.w, points)) * n, axis=-1)
     chosen = jnp.lexsort((where, jnp.where(touching, rate, jnp.inf)))[:SLOTS]
     order = chosen[jnp.argsort(jnp.where(touching[chosen], where[chosen], jnp.inf))]
     present = touching[order]
     r = points[order]
+    n, t1, t2, mu = n[order], t1[order], t2[order], mu[order]
     J, minv, W = _jacobians(body, R, r, n, t1, t2)
     u = jnp.concatenate([state.vel, geom.w])
     c = jnp.where(present[:, None], J @ u, 0.0)  # (S, 3)
@@ -244,10 +256,10 @@ def solve_impacts(state, geom, points, touching, scene, tol):
             errors[best] <= 1e-5 * speed + tol.velocity,
         )
 
-    zero = jnp.zeros_like(e)
+    zero, no_friction = jnp.zeros_like(e), jnp.zeros_like(mu)
     u_after, generalised, consistent = jax.vmap(variant)(
         jnp.stack([e, e, zero, zero]),
-        jnp.stack([mu, zero, zero, zero]),
+        jnp.stack([mu, no_friction, no_friction, no_friction]),
         jnp.array([False, False, True, False]),
     )
     states = State(
@@ -257,7 +269,9 @@ def solve_impacts(state, geom, points, touching, scene, tol):
         u_after[:, 3:] @ R,  # body frame: R^T w for each variant
     )
     impulse, moment = generalised[:, :3], generalised[:, 3:]
-    # where the impulse acts: the point of its line of action on the floor plane
+    # where the impulse acts: the point of its line of action on the tangent plane of the
+    # first slot's point
+    n = n[0]
     jn = impulse @ n
     tiny = jnp.finfo(dtype).tiny
     arm = cross(impulse, moment) / jnp.maximum(jnp.sum(impulse**2, -1), tiny)[:, None]

@@ -101,12 +101,15 @@ class CandidateTable:
         for f, pts in enumerate(model.face_points):
             for stick in (True, False):
                 rows.append((FACE, pts[0], pts[0], f, stick, False, pts, pts if stick else ()))
+        smooth = model.smooth_points  # these slide only
         for a, b in model.pairs:
             for sa, sb in ((True, True), (True, False), (False, True), (False, False)):
+                if (sa and a in smooth) or (sb and b in smooth):
+                    continue
                 held = tuple(p for p, s in ((a, sa), (b, sb)) if s)
                 rows.append((PAIR, a, b, 0, sa, sb, (a, b), held))
         for a in model.point_features:
-            for stick in (True, False):
+            for stick in (True, False) if a not in smooth else (False,):
                 rows.append((POINT, a, a, 0, stick, False, (a,), (a,) if stick else ()))
         rows.append((FLIGHT, 0, 0, 0, False, False, (), ()))
 
@@ -180,11 +183,12 @@ def active_points(model, mode: Mode) -> jax.Array:
 
 
 class Geometry(eqx.Module):
-    """The contact kinematics of a state, world frame: the surface's normal n and tangents
-    t1, t2 at the contact and their rates (zero on a plane); the rotation R and angular
-    velocity w; the contact points' offsets r (P, 3) from the mass centre, their rates
-    r' (P, 3), gaps g (P,), gap rates g' (P,) and slips (P, 3); `region`: the surface's
-    region margin at the body's centre (see `Mode.side`)."""
+    """The contact kinematics of a state, world frame: each contact point's surface normal n
+    and tangents t1, t2 (P, 3) and their rates (zero on a plane; every point has the same
+    frame but on a surface of several parts, where point i has part i's); the rotation R and
+    angular velocity w; the contact points' offsets r (P, 3) from the mass centre, their
+    rates r' (P, 3), gaps g (P,), gap rates g' (P,) and slips (P, 3); `region`: the
+    surface's region margin at the body's centre (see `Mode.side`)."""
 
     n: jax.Array
     t1: jax.Array
@@ -202,22 +206,53 @@ class Geometry(eqx.Module):
     region: jax.Array
 
     def tangential(self, x):
-        return x - (x @ self.n)[..., None] * self.n
+        """The parts of vectors x (P, 3), one per contact point, along its surface."""
+        return x - jnp.sum(x * self.n, axis=-1, keepdims=True) * self.n
+
+    def frame_of(self, i):
+        """(n, t1, t2) of contact point `i`."""
+        return self.n[i], self.t1[i], self.t2[i]
 
 
 def surface_frame(state: State, scene, model, R, w, side=None):
-    """The contact frame (n, t1, t2) and its rate (world). On a plane it is the plane's; on
-    a curved surface it is taken at the ball's centre, c = x + R offset, and differentiated
-    along the centre's velocity c' = v + w x (R offset); `side` picks the part of the
-    surface (None: the part the ball is over)."""
+    """The contact frames (n, t1, t2), each (P, 3) (a row per contact point), and their
+    rates (world). On a plane they are the plane's; on a curved surface they are taken at
+    the ball's centre, c = x + R offset, and differentiated along the centre's velocity
+    c' = v + w x (R offset); `side` picks the part of the surface (None: the part the ball
+    is over). On a surface of several parts, row i is part i's frame."""
     surface = scene.floor
     dtype = state.pos.dtype
+    P = model.num_points
+    per_point = lambda frame: tuple(jnp.broadcast_to(e, (P, 3)) for e in frame)  # noqa: E731
     if not surface.curved:
         zero = jnp.zeros(3, dtype)
-        return surface.frame(dtype), (zero, zero, zero)
+        return per_point(surface.frame(dtype)), per_point((zero, zero, zero))
     arm = R @ model.offset.astype(dtype)
     centre, centre_vel = state.pos + arm, state.vel + cross(w, arm)
-    return jax.jvp(lambda c: surface.frame_at(c, side), (centre,), (centre_vel,))
+    if surface.parts > 1:
+        frames = lambda c: surface.part_frames(c, side)  # noqa: E731
+    else:
+        frames = lambda c: per_point(surface.frame_at(c, side))  # noqa: E731
+    return jax.jvp(frames, (centre,), (centre_vel,))
+
+
+def point_gaps(surface, points, side=None):
+    """Gaps (m) (P,) of world contact `points` (P, 3): above the surface, or on a surface of
+    several parts, point i's above part i."""
+    if surface.parts > 1:
+        return jnp.diagonal(surface.part_gaps(points, side))
+    return surface.gap(points, side)
+
+
+def point_coefficients(scene, model):
+    """Friction, rolling and spin resistance (each (P,)) at each contact point: the
+    surface's, or on a surface of several parts, that of the part each point touches."""
+    surface = scene.floor
+    if surface.parts > 1:
+        return surface.part_coefficients()
+    P = model.num_points
+    coefficients = (surface.friction, surface.rolling_resistance, surface.spin_resistance)
+    return tuple(jnp.broadcast_to(c, (P,)) for c in coefficients)
 
 
 def geometry(state: State, scene, model, seed, side=None) -> Geometry:
@@ -233,8 +268,9 @@ def geometry(state: State, scene, model, seed, side=None) -> Geometry:
     R = quat_to_matrix(state.quat)
     w = R @ state.omega
     (n, t1, t2), (n_dot, t1_dot, t2_dot) = surface_frame(state, scene, model, R, w, side)
-    down = R.T @ n
-    down_dot = cross(down, state.omega) + R.T @ n_dot
+    # the normal in the body frame: one per part on a surface of several, else the one
+    down, down_rate = (n @ R, n_dot @ R) if scene.floor.parts > 1 else (R.T @ n[0], R.T @ n_dot[0])
+    down_dot = cross(down, state.omega) + down_rate
     if model.moving_points:
         p, p_dot = jax.jvp(lambda d: model.points(d, seed), (down,), (down_dot,))
     else:
@@ -242,9 +278,9 @@ def geometry(state: State, scene, model, seed, side=None) -> Geometry:
         p_dot = jnp.zeros_like(p)
     r = p @ R.T
     r_dot = cross(w, r) + p_dot @ R.T
-    gap = scene.floor.gap(state.pos + r, side)
+    gap = point_gaps(scene.floor, state.pos + r, side)
     vel = state.vel + cross(w, r)
-    gap_rate = vel @ n
+    gap_rate = jnp.sum(vel * n, axis=-1)
     slip = vel - gap_rate[:, None] * n
     region = jnp.ones((), state.pos.dtype)
     if scene.floor.curved:
@@ -302,7 +338,8 @@ def face_twist(state, geom, model, face):
     rc = geom.R @ centres[face]
     vc = state.vel + cross(geom.w, rc)
     rho = rhos[face]
-    return jnp.stack([vc @ geom.t1, vc @ geom.t2, rho * (geom.w @ geom.n)]), rho
+    n, t1, t2 = geom.frame_of(0)  # a face meets a plane: one frame
+    return jnp.stack([vc @ t1, vc @ t2, rho * (geom.w @ n)]), rho
 
 
 def _with_face_rows(state, geom, mode, hat_f, mu, scene, model, point_rows):
@@ -310,7 +347,7 @@ def _with_face_rows(state, geom, mode, hat_f, mu, scene, model, point_rows):
     tangential at the centre, spin), or `point_rows` for the other kinds."""
     p_d, p_r, p_rdot, p_dC, p_mask, p_pos = point_rows
     dtype = state.pos.dtype
-    n, t1, t2, R, w = geom.n, geom.t1, geom.t2, geom.R, geom.w
+    (n, t1, t2), R, w = geom.frame_of(0), geom.R, geom.w  # a face meets a plane: one frame
     is_face, stick = mode.kind == FACE, mode.stick[0]
     zero, zero3 = jnp.zeros((), dtype), jnp.zeros(3, dtype)
     normals, centres, _ = model.face_frame()
@@ -347,49 +384,53 @@ def _with_face_rows(state, geom, mode, hat_f, mu, scene, model, point_rows):
     )
 
 
-def resisting_couple(geom: Geometry, surface, radius, blend):
-    """The couple (N m per N of normal force, world) that resists a ball's rolling and
-    spinning on `surface`: -r (mu_r e_roll + mu_s e_spin n), with e_roll the direction of
-    the angular velocity's part along the surface and e_spin the sign of its part about the
-    normal n. Each direction is taken of the speed it makes at the ball's surface
-    (r w_t, r w . n) over max(that speed, `blend`): below the blend speed (m/s) the couple
-    falls linearly to zero, so a ball comes to rest smoothly rather than chattering."""
-    w_n = geom.w @ geom.n
-    roll = radius * (geom.w - w_n * geom.n)
+def resisting_couple(w, n, mu_r, mu_s, radius, blend):
+    """The couple (N m per N of normal force, world) that resists the rolling and spinning
+    of a ball of angular velocity `w` (world) at a contact of normal `n`:
+    -r (mu_r e_roll + mu_s e_spin n), with e_roll the direction of the angular velocity's
+    part along the surface and e_spin the sign of its part about the normal n. Each
+    direction is taken of the speed it makes at the ball's surface (r w_t, r w . n) over
+    max(that speed, `blend`): below the blend speed (m/s) the couple falls linearly to zero,
+    so a ball comes to rest smoothly rather than chattering."""
+    w_n = w @ n
+    roll = radius * (w - w_n * n)
     spin = radius * w_n
     e_roll = roll / jnp.maximum(_safe_norm(roll), blend)
     e_spin = spin / jnp.maximum(jnp.abs(spin), blend)
-    mu_r, mu_s = surface.rolling_resistance, surface.spin_resistance
-    return -radius * (mu_r * e_roll + mu_s * e_spin * geom.n)
+    return -radius * (mu_r * e_roll + mu_s * e_spin * n)
 
 
 def mode_rows(state, geom: Geometry, mode: Mode, hats, mu, scene, model, blend=None) -> Rows:
     """The rows of `mode` at `state`; `hats` = (slip direction at a, at b, face twist
-    direction) that sliding friction (coefficient `mu`) opposes (unit, or zero). `blend`
-    (m/s): the speed below which a ball's rolling and spin resistance fade
-    (`resisting_couple`); None leaves them out of the force columns (for the projections,
-    which use only the rows)."""
+    direction) that sliding friction (coefficient `mu`, one per contact point (P,) or one
+    for all) opposes (unit, or zero). `blend` (m/s): the speed below which a ball's rolling
+    and spin resistance fade (`resisting_couple`); None leaves them out of the force columns
+    (for the projections, which use only the rows)."""
     dtype = state.pos.dtype
-    n, t1, t2, w = geom.n, geom.t1, geom.t2, geom.w
+    w = geom.w
+    mu = jnp.broadcast_to(mu, (model.num_points,))
     kind, stick_a, stick_b = mode.kind, mode.stick[0], mode.stick[1]
     hat_a, hat_b, hat_f = hats
     is_pair = kind == PAIR
     point_like = (kind == POINT) | is_pair
 
-    # points and pairs: normal at a, normal at b, two tangential rows at a, two at b
+    # points and pairs: normal at a, normal at b, two tangential rows at a, two at b, each
+    # in its point's frame; a pair's tangential rows run across and along its line
     ra, rb = geom.r[mode.a], geom.r[mode.b]
-    along = unit_or(geom.tangential(rb - ra), t1)
-    e1 = jnp.where(is_pair, cross(n, along), t1)
-    e2 = jnp.where(is_pair, along, t2)
-    p_d = jnp.stack([n, n, e1, e2, e1, e2])
+    (n_a, t1_a, t2_a), (n_b, t1_b, t2_b) = geom.frame_of(mode.a), geom.frame_of(mode.b)
+    along_a = unit_or(rb - ra - ((rb - ra) @ n_a) * n_a, t1_a)
+    along_b = unit_or(rb - ra - ((rb - ra) @ n_b) * n_b, t1_b)
+    e1_a, e2_a = jnp.where(is_pair, cross(n_a, along_a), t1_a), jnp.where(is_pair, along_a, t2_a)
+    e1_b, e2_b = jnp.where(is_pair, cross(n_b, along_b), t1_b), jnp.where(is_pair, along_b, t2_b)
+    p_d = jnp.stack([n_a, n_b, e1_a, e2_a, e1_b, e2_b])
     p_r = jnp.stack([ra, rb, ra, ra, rb, rb])
     p_rdot = jnp.stack([geom.r_dot[i] for i in (mode.a, mode.b, mode.a, mode.a, mode.b, mode.b)])
     zero = jnp.zeros((), dtype)
     p_pos = jnp.stack([geom.gap[mode.a], geom.gap[mode.b], zero, zero, zero, zero])
     p_dC = jnp.concatenate(
         [
-            jnp.where(stick_a, n, n - mu * hat_a)[None],
-            jnp.where(stick_b, n, n - mu * hat_b)[None],
+            jnp.where(stick_a, n_a, n_a - mu[mode.a] * hat_a)[None],
+            jnp.where(stick_b, n_b, n_b - mu[mode.b] * hat_b)[None],
             p_d[2:],
         ]
     )
@@ -406,22 +447,28 @@ def mode_rows(state, geom: Geometry, mode: Mode, hats, mu, scene, model, blend=N
 
     if not model.num_faces:  # a shape with no face (a ball): point rows only
         k = kC = jnp.zeros((6, 3), dtype)
-        if blend is not None:  # its rolling and spin resistance ride on the normal force
-            kC = kC.at[0].set(resisting_couple(geom, scene.floor, model.radius, blend))
+        if blend is not None:  # its rolling and spin resistance ride on the normal forces
+            _, mu_r, mu_s = point_coefficients(scene, model)
+            couple = lambda i, n: resisting_couple(w, n, mu_r[i], mu_s[i], model.radius, blend)  # noqa: E731
+            kC = kC.at[0].set(couple(mode.a, n_a)).at[1].set(couple(mode.b, n_b))
         d, r, r_dot, dC, mask, pos = p_d, p_r, p_rdot, p_dC, p_mask, p_pos
         holonomic = mask & jnp.array([True, True, False, False, False, False])
         twist, rho = jnp.zeros(3, dtype), jnp.ones((), dtype)
     else:
         d, r, r_dot, k, dC, kC, mask, pos, holonomic, twist, rho = _with_face_rows(
-            state, geom, mode, hat_f, mu, scene, model, (p_d, p_r, p_rdot, p_dC, p_mask, p_pos)
+            state, geom, mode, hat_f, mu[0], scene, model, (p_d, p_r, p_rdot, p_dC, p_mask, p_pos)
         )
     J = jnp.concatenate([d, cross(r, d) + k], axis=1)
     C = jnp.concatenate([dC, cross(r, dC) + kC], axis=1)
     point_vel = state.vel + cross(w, r)
     bias = jnp.sum(d * cross(w, r_dot), axis=1)
     if scene.floor.curved:  # a ball's point rows: their directions turn with the frame
-        g = geom
-        d_dot = jnp.stack([g.n_dot, g.n_dot, g.t1_dot, g.t2_dot, g.t1_dot, g.t2_dot])
+        # (a pair's tangential rows turn otherwise than t1, t2, but they are used only
+        # while their point sticks, with zero velocity, when the term vanishes)
+        g, a, b = geom, mode.a, mode.b
+        d_dot = jnp.stack(
+            [g.n_dot[a], g.n_dot[b], g.t1_dot[a], g.t2_dot[a], g.t1_dot[b], g.t2_dot[b]]
+        )
         bias = bias + jnp.sum(d_dot * point_vel, axis=1)
     return Rows(
         J=J,
@@ -488,7 +535,8 @@ class Solution(eqx.Module):
             return jnp.zeros(3, state.pos.dtype)
         rc = g.R @ centres[face]
         ac = self.acc + cross(self.alpha, rc) + cross(g.w, cross(g.w, rc))
-        return jnp.stack([ac @ g.t1, ac @ g.t2, rhos[face] * (self.alpha @ g.n)])
+        n, t1, t2 = g.frame_of(0)  # a face meets a plane: one frame
+        return jnp.stack([ac @ t1, ac @ t2, rhos[face] * (self.alpha @ n)])
 
 
 def solve_mode(t, state: State, mode: Mode, scene, model, tol, hats=None, geom=None) -> Solution:
@@ -508,9 +556,8 @@ def solve_mode(t, state: State, mode: Mode, scene, model, tol, hats=None, geom=N
     if hats is None:
         twist, _ = face_twist(state, geom, model, mode.face)
         hats = sliding_hats(geom, twist, mode, tol.slip_blend)
-    rows = mode_rows(
-        state, geom, mode, hats, scene.floor.friction, scene, model, blend=tol.slip_blend
-    )
+    mu, _, _ = point_coefficients(scene, model)
+    rows = mode_rows(state, geom, mode, hats, mu, scene, model, blend=tol.slip_blend)
     acc0, omega_dot0 = accelerations(t, state, scene)
     u0_dot = jnp.concatenate([acc0, geom.R @ omega_dot0])
     beta = jnp.asarray(beta, dtype)
@@ -569,7 +616,7 @@ def sliding_solver(t, state: State, mode: Mode, scene, model, tol, geom) -> Slid
     """The `SlidingSolver` of `mode` at `state` (unit quaternion), `geom` its geometry."""
     body = scene.body
     dtype = state.pos.dtype
-    mu = scene.floor.friction
+    mu, _, _ = point_coefficients(scene, model)
     blend = tol.slip_blend
 
     def columns(H):

@@ -22,6 +22,7 @@ from ._modes import (
     cross,
     face_twist,
     inverse_mass_columns,
+    point_coefficients,
     sliding_solver,
     solve_mode,
     unit_or,
@@ -192,13 +193,12 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip):
     keep = np.array([0, 2, 3])  # rows: normal, t1, t2 at point a
     Jp = rows.J[keep]
     Kp = Jp @ inverse_mass_columns(scene.body, geom.R, Jp).T
-    frame = jnp.stack([geom.n, geom.t1, geom.t2])
+    frame = jnp.stack(geom.frame_of(mode.a))
     # the point's acceleration without contact force: J u' - K lambda, plus the rows' bias
     u_dot = jnp.concatenate([held.acc, held.alpha])
     bp = frame.T @ (Jp @ u_dot - Kp @ lam[keep] + rows.bias[keep])
-    point_dir, found = point_sliding_direction(
-        bp, frame.T @ Kp @ frame, scene.floor.friction, *frame
-    )
+    mu, _, _ = point_coefficients(scene, model)
+    point_dir, found = point_sliding_direction(bp, frame.T @ Kp @ frame, mu[mode.a], *frame)
     # (none found: at the cone's edge the slip's acceleration vanishes along the direction
     # opposite to the friction sticking needs, which the seed below already is)
     need_a = jnp.where((mode.kind == POINT) & found, -point_dir, need_a)
@@ -220,7 +220,7 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip):
 
     end = jnp.where(scan_b, 1, 0)
     end_dir, end_found = scan_direction(
-        lambda s: end_measure(end, s), geom.n, geom.t1, geom.t2, dtype
+        lambda s: end_measure(end, s), *geom.frame_of(jnp.where(scan_b, mode.b, mode.a)), dtype
     )
     exact_a = pair & rest_a & ~rest_b & end_found
     exact_b = scan_b & end_found
@@ -233,34 +233,41 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip):
     # directions opposite to the friction sticking would need and from those across and
     # along the line (rigidity ties the two ends' slips along it, and a line that slides
     # sideways as a whole has both ends sliding across it)
-    n, t1, t2 = geom.n, geom.t1, geom.t2
-    line = unit_or(geom.tangential(geom.r[mode.b] - geom.r[mode.a]), t1)
-    angle = lambda s: jnp.arctan2(s @ t2, s @ t1)  # noqa: E731
-    across, along_line = angle(cross(n, line)), angle(line)
+    # (each end's directions in its own point's frame)
+    ends = (geom.frame_of(mode.a), geom.frame_of(mode.b))
+    chord = geom.r[mode.b] - geom.r[mode.a]
+    angle = lambda s, end: jnp.arctan2(s @ end[2], s @ end[1])  # noqa: E731
+    on_floor = lambda x, end: jnp.cos(x) * end[1] + jnp.sin(x) * end[2]  # noqa: E731
+
+    def line_angles(end):  # the directions across and along the line at that end
+        n, t1, _ = end
+        line = unit_or(chord - (chord @ n) * n, t1)
+        return angle(cross(n, line), end), angle(line, end)
+
+    (across_a, along_a), (across_b, along_b) = line_angles(ends[0]), line_angles(ends[1])
     seeds = jnp.stack(
         [
-            jnp.stack([angle(hats0[0]), angle(hats0[1])]),
-            jnp.stack([across, across]),
-            jnp.stack([across + jnp.pi, across + jnp.pi]),
-            jnp.stack([along_line, along_line]),
-            jnp.stack([along_line + jnp.pi, along_line + jnp.pi]),
+            jnp.stack([angle(hats0[0], ends[0]), angle(hats0[1], ends[1])]),
+            jnp.stack([across_a, across_b]),
+            jnp.stack([across_a + jnp.pi, across_b + jnp.pi]),
+            jnp.stack([along_a, along_b]),
+            jnp.stack([along_a + jnp.pi, along_b + jnp.pi]),
         ]
     )
-    on_floor = lambda x: jnp.cos(x) * t1 + jnp.sin(x) * t2  # noqa: E731
 
     def pair_measure(x):
-        sa, sb = on_floor(x[0]), on_floor(x[1])
+        sa, sb = on_floor(x[0], ends[0]), on_floor(x[1], ends[1])
         sol = solve((sa, sb, hats0[2]))
         acc = geom.tangential(sol.point_accelerations())
         aa, ab = acc[mode.a], acc[mode.b]
-        turning = jnp.stack([cross(aa, sa) @ n, cross(ab, sb) @ n])
+        turning = jnp.stack([cross(aa, sa) @ ends[0][0], cross(ab, sb) @ ends[1][0]])
         return turning, jnp.stack([aa @ sa, ab @ sb]), (sol.lam[0] >= 0) & (sol.lam[1] >= 0)
 
     pair_x, pair_found = newton_directions(pair_measure, seeds, dtype)
     exact_pair = pair & rest_a & rest_b & pair_found
     hats0 = (
-        jnp.where(exact_pair, on_floor(pair_x[0]), hats0[0]),
-        jnp.where(exact_pair, on_floor(pair_x[1]), hats0[1]),
+        jnp.where(exact_pair, on_floor(pair_x[0], ends[0]), hats0[0]),
+        jnp.where(exact_pair, on_floor(pair_x[1], ends[1]), hats0[1]),
         hats0[2],
     )
     small = 1e-6 * (1.0 + _safe_norm(held.acc))  # slip accelerations below this: keep the seed
@@ -291,7 +298,7 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip):
     force = conditions(sol, mode, model, scene, tol)[P:]
     keep = jnp.array([True] * 5 + [False, False, True, False])  # not the slips, junction
     force = jnp.where(keep, force, UNUSED)
-    gap_acc = sol.point_accelerations() @ geom.n
+    gap_acc = jnp.sum(sol.point_accelerations() * geom.n, axis=-1)
     gap_margin = jnp.where(resting & ~active_points(model, mode), gap_acc, UNUSED)
     # sliding from rest: the slip must accelerate along the direction friction opposes
     sa, sb, st = slip_rates(sol)

@@ -48,7 +48,7 @@ def step_limit_of(sol, mode, offsets, model, tol) -> jax.Array:
     gap = jnp.where(free, geom.gap, 1.0)
     speed = jnp.maximum(-geom.gap_rate, 0.0)
     # a curved surface's gap also changes as the point moves along it: n' . v_p
-    curving = jnp.abs(geom.slip @ geom.n_dot)
+    curving = jnp.abs(jnp.sum(geom.slip * geom.n_dot, axis=-1))
     acc = 2.0 * (jnp.linalg.norm(sol.point_accelerations(), axis=-1) + curving)
     acc = acc + jnp.finfo(dtype).tiny
     room = SHRINK * gap

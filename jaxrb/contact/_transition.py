@@ -19,6 +19,8 @@ from ._modes import (
     cross,
     geometry,
     no_derivative,
+    point_coefficients,
+    point_gaps,
     solve_mode,
     unit_state,
 )
@@ -76,11 +78,19 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol) -> EventOutcom
     geom = geometry(state, scene, model, mode.seed)
     flat = jnp.asarray(model.flat_points)
     touching = (geom.gap <= jnp.where(flat, tol.flat, tol.contact)) | active_points(model, mode)
-    # the impact points (a coin's caps: rings of rim points) and which of them touch
-    body_points, ring = model.impact_points(geom.R.T @ geom.n, mode.seed)
+    # the impact points (a coin's caps: rings of rim points) and which of them touch; on a
+    # surface of several parts they are the contact points, each with its part's frame
+    several = scene.floor.parts > 1
+    down = geom.n @ geom.R if several else geom.R.T @ geom.n[0]
+    body_points, ring = model.impact_points(down, mode.seed)
     points = body_points @ geom.R.T
-    points_gap = scene.floor.gap(state.pos + points)
-    points_rate = (state.vel + cross(geom.w, points)) @ geom.n
+    Q = points.shape[0]
+    frames = (geom.n, geom.t1, geom.t2) if several else geom.frame_of(0)
+    frames = tuple(jnp.broadcast_to(e, (Q, 3)) for e in frames)
+    mu = point_coefficients(scene, model)[0]
+    mu = mu if several else jnp.broadcast_to(mu[0], (Q,))
+    points_gap = point_gaps(scene.floor, state.pos + points)
+    points_rate = jnp.sum((state.vel + cross(geom.w, points)) * frames[0], axis=-1)
     hitting = points_gap <= jnp.where(ring, tol.flat, tol.contact)
     approaching = hitting & (points_rate < -tol.slip_stop)
     impact = jnp.any(approaching)
@@ -88,7 +98,7 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol) -> EventOutcom
     penetration = jnp.maximum(-jnp.min(jnp.where(flat, jnp.inf, geom.gap)), 0.0)
 
     # the impact three ways; Newton-Coulomb unless it adds energy; its bounce series' limit
-    hits = solve_impacts(state, geom, points, hitting, scene, tol)
+    hits = solve_impacts(state, geom, points, hitting, scene, tol, frames, mu)
     pick = lambda k: jax.tree.map(lambda x: x[k], hits)  # noqa: E731
     newton = pick(NEWTON)
     kinetic0 = _kinetic(body, state)
@@ -103,10 +113,12 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol) -> EventOutcom
     smooth = jax.tree.map(lambda a, b: jnp.where(plastic, b, a), smooth, pick(PLASTIC))
     hit = jax.tree.map(lambda a, b: jnp.where(guarded, b, a), newton, smooth)
     v, w = hit.state.vel, geom.R @ hit.state.omega
-    leaving = (v + cross(w, points)) @ geom.n
+    leaving = jnp.sum((v + cross(w, points)) * frames[0], axis=-1)
     bounce = jnp.max(jnp.where(hitting, leaving, 0.0))
     acc0, _ = accelerations(t, state, scene)
-    pressing = -(acc0 @ geom.n)  # > 0: the forces press the body onto the floor
+    # > 0: the forces press the body onto the surface where it approaches fastest
+    fastest = jnp.argmax(jnp.where(approaching, -points_rate, -jnp.inf))
+    pressing = -(acc0 @ frames[0][fastest])
     merged = impact & (pressing > 0) & (bounce > tol.slip_stop) & (bounce < tol.rest_speed)
     hit = jax.tree.map(lambda a, b: jnp.where(merged, b, a), hit, pick(HELD))
     one_minus_e = jnp.where(e < 1, 1 - e, 1.0)
@@ -118,11 +130,12 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol) -> EventOutcom
     # the next mode (a flat cap's rim needs to know where the body tips: the seed)
     if model.needs_seed:
         old = solve_mode(t, *no_derivative((state, mode, scene)), model, tol)
-        couple = geom.R.T @ (old.lam[1] * geom.t1 + old.lam[2] * geom.t2)
+        n, t1, t2 = geom.frame_of(0)  # a face meets a plane: one frame
+        couple = geom.R.T @ (old.lam[1] * t1 + old.lam[2] * t2)
         normals, _, _ = model.face_frame()
         tipped = (mode.kind == FACE) & (trigger == model.num_points + COP)
         cop_offset = cross(couple, normals[mode.face])
-        down = jax.lax.stop_gradient(geom.R.T @ geom.n)
+        down = jax.lax.stop_gradient(geom.R.T @ n)
         seed = model.rim_seed(down, jnp.where(tipped, cop_offset, 0.0), mode.seed)
         mode = eqx.tree_at(lambda m: m.seed, mode, seed)
     # the part of a curved surface the ball now touches: past a junction the other one, else
