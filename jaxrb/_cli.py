@@ -47,7 +47,7 @@ MAX_SWEEP_RUNS = 100_000
 
 _EPILOG_RUN = """\
 examples (SCENE may name one; an existing file of that name takes precedence):
-  die, coin, pendulum, heavy_top, ball_in_bowl, thick_coin
+  die, coin, pendulum, heavy_top, ball_in_bowl, thick_coin, roulette
                                      list them: jaxrb run --list; print one: jaxrb run NAME --show
 
 outputs (in OUTPUT):
@@ -764,8 +764,8 @@ def _add_common(p, output=True):
         default=None,
         metavar="SCENE",
         help="a scene file (SCENE.toml) or the name of a shipped example (die, coin, pendulum, "
-        "heavy_top, ball_in_bowl, thick_coin; see jaxrb run --list); default: die, thrown "
-        "onto a table",
+        "heavy_top, ball_in_bowl, thick_coin, roulette; see jaxrb run --list); default: die, "
+        "thrown onto a table",
     )
     if output:
         add_output_options(p)
