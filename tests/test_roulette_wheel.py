@@ -31,12 +31,12 @@ E_RHO, E_PHI, E_Z = np.eye(3)
 V0, MU_R, DRAG = 2.0, 0.01, 1e-3  # m/s, -, kg/m
 
 
-def rolling_closed_form(mu_r=MU_R, k=DRAG, v0=V0):
+def rolling_closed_form(mu_r=MU_R, k=DRAG, v0=V0, m=MASS, rho=RHO, d=D):
     """(v(t), leaving time) of a ball rolling round against the wall."""
-    A = 5 / 7 * mu_r * G / np.cos(D)
-    B = 5 / 7 * (k / MASS - 0.4 * mu_r * np.sin(D) / RHO)
+    A = 5 / 7 * mu_r * G / np.cos(d)
+    B = 5 / 7 * (k / m - 0.4 * mu_r * np.sin(d) / rho)
     q, rate = np.sqrt(B / A), np.sqrt(A * B)
-    v_leave = np.sqrt(5 / 7 * G * RHO * np.tan(D))
+    v_leave = np.sqrt(5 / 7 * G * rho * np.tan(d))
     return (
         lambda t: np.tan(np.arctan(q * v0) - rate * t) / q,
         (np.arctan(q * v0) - np.arctan(q * v_leave)) / rate,
@@ -217,9 +217,5 @@ def test_the_roulette_example_leaves_the_wall_where_its_file_says():
     normal = m * (G / np.cos(d) - 0.4 * v0**2 / rho * np.sin(d))
     needed = np.hypot(0.4 * m * v0**2 / rho * np.cos(d), 2 / 7 * k * v0**2 - 5 / 7 * mu_r * normal)
     assert needed < mu * normal
-    A = 5 / 7 * mu_r * G / np.cos(d)
-    B = 5 / 7 * (k / m - 0.4 * mu_r * np.sin(d) / rho)
-    q = np.sqrt(B / A)
-    v_leave = np.sqrt(5 / 7 * G * rho * np.tan(d))
-    t_leave = (np.arctan(q * v0) - np.arctan(q * v_leave)) / np.sqrt(A * B)
+    _, t_leave = rolling_closed_form(mu_r, k, v0, m, rho, d)
     assert abs(t_leave - 10.02) < 0.005 and spec.ts[-1] > t_leave
