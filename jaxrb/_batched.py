@@ -23,7 +23,7 @@ import numpy as np
 from ._checks import all_met, is_concrete
 from ._coordinates import ROTATION, coordinates_for
 from ._inputs import check_concrete_inputs, check_solver_settings, input_result, safe_times
-from ._results import RESULTS
+from ._results import RESULTS, raise_if_failed
 from ._solve import DEFAULT_MAX_STEPS, default_solver, solve
 from ._state import State
 from ._trajectory import Trajectory
@@ -251,7 +251,7 @@ def simulate_batch(
     else:
         traj = _sharded(run, scene, states0, args, batched_scene, devices)
     if throw:  # outside the compiled function: throw=True/False share one compilation
-        traj = traj.result.error_if(traj, traj.result != RESULTS.successful)
+        traj = raise_if_failed(traj)
     return traj
 
 

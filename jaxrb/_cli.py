@@ -910,7 +910,7 @@ def _run_or_sweep(args) -> int:
                 return _show(args)
             import jax
 
-            speed_up_compilation(cache=not args.no_cache)
+            speed_up_compilation(cache=not args.no_cache, nan_checks=True)
             jax.config.update("jax_enable_x64", True)
             return args.func(args)
     except (CLIError, SceneFileError) as e:
@@ -968,7 +968,7 @@ def main(argv=None) -> int:
         return _run_or_sweep(args)
     import jax
 
-    speed_up_compilation(cache=not getattr(args, "no_cache", False))
+    speed_up_compilation(cache=not getattr(args, "no_cache", False), nan_checks=True)
     jax.config.update("jax_enable_x64", True)
     from ._scene_file import SceneFileError
 

@@ -8,7 +8,9 @@ program's entry point (the `jaxrb` command line calls it, and so can a script or
 - on the CPU, XLA's older kernel emitters (`--xla_cpu_use_fusion_emitters=false`): for
   jaxrb's contact programs (tens of thousands of small operations) they compile in about
   four fifths of the time and run no slower (measured on a 2-core x86 CPU: a die's
-  program 55 s -> 43 s of compile CPU time, its 16 s throw about 0.23 s either way).
+  program 55 s -> 43 s of compile CPU time, its 16 s throw about 0.23 s either way);
+- optionally (`nan_checks`), equinox's run-time checks without host callbacks, so that
+  derivative programs compiled by the caller's own `jax.jit` can be cached too.
 """
 
 import os
@@ -41,13 +43,34 @@ def _backend_started() -> bool:
     return bool(xla_bridge._backends)
 
 
-def speed_up_compilation(cache: bool = True, cache_dir=None) -> Path | None:
+def speed_up_compilation(
+    cache: bool = True, cache_dir=None, nan_checks: bool = False
+) -> Path | None:
     """Turn on the persistent compilation cache (if `cache`) in `cache_dir` (default
     `default_cache_dir()`; a contact scene's program takes 0.5-2 MB there, and nothing is
     removed by itself: the directory can be deleted at any time), and, if JAX has not
     started its CPU backend yet and `XLA_FLAGS` does not choose otherwise, the quicker CPU
     kernel emitters. Changes process-wide settings: call it once at the start of a program.
-    Returns the cache directory (None without a cache)."""
+    Returns the cache directory (None without a cache).
+
+    `nan_checks=True` also makes equinox's run-time checks (`equinox.error_if`, used inside
+    diffrax, optimistix and lineax) return NaN where they fail instead of raising through a
+    host callback, in every program the process compiles from then on (equinox's
+    `EQX_ON_ERROR=nan`; left alone if the environment sets `EQX_ON_ERROR`). JAX's persistent
+    cache keeps no program with a host callback, and a derivative through an event time
+    (an impact, a mode change) carries such a check, in the linear solve of the event
+    time's implicit derivative. jaxrb's own calls (`simulate`, the fits) compile their
+    programs without it anyway; this setting is for derivatives compiled by your own
+    `jax.jit`, e.g. `jax.jit(jax.grad(loss))` of a loss that calls `simulate`. A failed
+    solve is still flagged in jaxrb's result codes, and `throw=True` still raises; your own
+    equinox checks return NaN too.
+    """
+    if nan_checks and "EQX_ON_ERROR" not in os.environ:
+        import equinox as eqx
+
+        errors = getattr(eqx, "_errors", None)
+        if getattr(errors, "EQX_ON_ERROR", None) == "raise":
+            errors.EQX_ON_ERROR = "nan"
     flags = os.environ.get("XLA_FLAGS", "")
     if "xla_cpu_use_fusion_emitters" not in flags and not _backend_started():
         os.environ["XLA_FLAGS"] = f"{flags} {CPU_FLAG}".strip()

@@ -1,6 +1,7 @@
 """Result codes of a simulation: diffrax's, plus bad-input codes (one per batch member)."""
 
 import diffrax as dfx
+import equinox as eqx
 
 
 class RESULTS(dfx.RESULTS):  # pyright: ignore
@@ -50,4 +51,21 @@ class RESULTS(dfx.RESULTS):  # pyright: ignore
     )
     starts_below_floor = (
         "the body starts below the floor (its lowest point is under the floor plane)."
+    )
+
+
+def raise_if_failed(traj):
+    """`throw=True`: `traj` unchanged, or an error naming its result code where that is not
+    `successful` (at run time where the code is traced; for a batch, one member's message).
+    Raises whatever equinox's `EQX_ON_ERROR` says (`nan` makes equinox's own checks quiet,
+    and `throw=True` must not be), except that `breakpoint` is kept for debugging."""
+    errors = getattr(eqx, "_errors", None)
+    on_error = "default" if getattr(errors, "EQX_ON_ERROR", None) == "breakpoint" else "raise"
+    result = traj.result
+    return eqx.branched_error_if(
+        traj,
+        result != RESULTS.successful,
+        result._value,
+        RESULTS._index_to_message,
+        on_error=on_error,
     )

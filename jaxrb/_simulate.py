@@ -21,7 +21,7 @@ from ._inputs import (
     save_times,
     solver_settings_ok,
 )
-from ._results import RESULTS
+from ._results import RESULTS, raise_if_failed
 from ._solve import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, default_solver, solve
 from ._state import State
 from ._trajectory import Trajectory
@@ -195,7 +195,7 @@ def simulate(
         settings_ok,
     )
     if throw:  # outside the compiled function: throw=True/False share one compilation
-        traj = traj.result.error_if(traj, traj.result != RESULTS.successful)
+        traj = raise_if_failed(traj)
     return traj
 
 

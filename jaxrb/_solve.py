@@ -40,18 +40,29 @@ def checks_without_host_callbacks():
     where the event condition grazes zero, where the event time has no derivative). JAX's
     persistent compilation cache keeps no program with a host callback: without this, no
     compiled simulation could be cached. Only equinox's default `EQX_ON_ERROR=raise` is
-    changed; any other setting (e.g. `breakpoint` for debugging) is left as it is. (equinox
-    keeps the traced check for reuse: a diffrax solve of the same array shapes traced later
-    in the same process, outside jaxrb, may get the NaN form of these two checks too.)"""
+    changed; any other setting (e.g. `breakpoint` for debugging) is left as it is. equinox
+    keeps each traced check for reuse (per array shapes), and a checked linear solve is
+    traced again whenever a program is lowered: the kept checks are dropped on entering and
+    on leaving, so that neither form leaks into programs traced or lowered on the other side
+    of the scope."""
     errors = getattr(eqx, "_errors", None)
     if getattr(errors, "EQX_ON_ERROR", None) != "raise":
         yield
         return
     errors.EQX_ON_ERROR = "nan"
+    _forget_traced_checks(errors)
     try:
         yield
     finally:
         errors.EQX_ON_ERROR = "raise"
+        _forget_traced_checks(errors)
+
+
+def _forget_traced_checks(errors) -> None:
+    """Drop the traces equinox keeps of its run-time check (cheap to trace again)."""
+    cached = getattr(getattr(errors, "branched_error_if_impl_jit", None), "_cached", None)
+    if hasattr(cached, "clear_cache"):
+        cached.clear_cache()
 
 
 def save_at(ts) -> dfx.SaveAt:

@@ -1,10 +1,19 @@
 import os
 from pathlib import Path
 
-import jax
-import pytest
+# equinox's run-time checks return NaN instead of raising through a host callback (read by
+# equinox when it is imported, so before jax and jaxrb; inherited by the command lines and
+# notebook kernels the tests start). JAX's persistent cache keeps no program with a host
+# callback, and every derivative through an event time that a test compiles with its own
+# `jax.jit` / `jax.jacfwd` carries one (the checked linear solve of the event time's
+# implicit derivative): without this they were compiled again on every run of the suite.
+# jaxrb flags failed solves in its own result codes, which the tests check.
+os.environ.setdefault("EQX_ON_ERROR", "nan")
 
-import jaxrb
+import jax  # noqa: E402
+import pytest  # noqa: E402
+
+import jaxrb  # noqa: E402
 
 # Compiled programs go to their own cache beside the user's jaxrb cache (never into it):
 # `jax-tests` next to `jaxrb.default_cache_dir()` (e.g. ~/.cache/jaxrb/jax-tests), or

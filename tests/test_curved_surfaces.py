@@ -139,7 +139,7 @@ def _on_cone(tip_radius, state0, ts):
         body = jaxrb.RigidBody(0.05, shape=jaxrb.Sphere(R_CONE_BALL))
         cone = jaxrb.Cone(0.0, 0.8, inclination=D_CONE, tip_radius=tip_radius)
         scene = jaxrb.Scene(body, (jaxrb.Gravity(),), floor=cone)
-        traj = jaxrb.simulate(scene, state0, ts, rtol=1e-11, atol=1e-11, max_impacts=8)
+        traj = jaxrb.simulate(scene, state0, ts, rtol=1e-11, atol=1e-11, max_impacts=8, throw=False)
         return traj, jax.vmap(lambda s: jaxrb.energy(scene, s))(traj.states)
 
     return jax.vmap(one)(tip_radius, state0, ts)

@@ -37,7 +37,9 @@ def _balls(theta, restitution, mu, lift):
         body = jaxrb.RigidBody(0.05, shape=jaxrb.Sphere(R))
         scene = jaxrb.Scene(body, (jaxrb.Gravity(),), floor=floor)
         state0 = jaxrb.make_state(pos=(R + lift) * floor.normal)
-        return jaxrb.simulate(scene, state0, TS, rtol=1e-11, atol=1e-11, max_impacts=16)
+        return jaxrb.simulate(
+            scene, state0, TS, rtol=1e-11, atol=1e-11, max_impacts=16, throw=False
+        )
 
     return jax.vmap(one)(theta, restitution, mu, lift)
 
@@ -50,7 +52,9 @@ def _blocks(theta, mu):
         scene = jaxrb.Scene(body, (jaxrb.Gravity(),), floor=floor)
         quat = jaxrb.axis_angle_to_quat(jnp.array([0.0, 1.0, 0.0]), theta)  # face on the plane
         state0 = jaxrb.make_state(pos=A * floor.normal, quat=quat)
-        return jaxrb.simulate(scene, state0, TS, rtol=1e-11, atol=1e-11, max_impacts=16)
+        return jaxrb.simulate(
+            scene, state0, TS, rtol=1e-11, atol=1e-11, max_impacts=16, throw=False
+        )
 
     return jax.vmap(one)(theta, mu)
 
@@ -63,6 +67,7 @@ def test_ball_rolls_or_slides_down_the_incline_as_the_closed_forms_say():
     theta = np.radians([20.0, 30.0])
     mu = np.array([0.5, 0.1])  # tan 20 deg < 7/2 0.5 (rolls); tan 30 deg > 7/2 0.1 (slides)
     traj = _balls(jnp.asarray(theta), jnp.zeros(2), jnp.asarray(mu), jnp.zeros(2))
+    assert np.all(np.asarray(traj.result._value) == jaxrb.RESULTS.successful._value)
     t = np.asarray(TS)
     assert np.all(np.asarray(traj.impacts.count) == 0)
     for k, rolls in enumerate((True, False)):
@@ -91,6 +96,7 @@ def test_ball_bounces_on_a_frictionless_incline_at_the_closed_form_times():
     traj = _balls(
         jnp.asarray([theta, 0.0]), jnp.asarray([e, e]), jnp.zeros(2), jnp.asarray([lift, lift])
     )
+    assert np.all(np.asarray(traj.result._value) == jaxrb.RESULTS.successful._value)
     for k, g_normal in enumerate((G * np.cos(theta), G)):  # the incline; the level floor
         t1 = np.sqrt(2 * lift / g_normal)
         v1 = g_normal * t1
@@ -109,6 +115,7 @@ def test_block_sticks_or_slides_on_the_incline(steep):
     theta = np.radians([10.0, 30.0])
     mu = np.array([0.5, 0.3])  # tan 10 deg < 0.5 (sticks); tan 30 deg > 0.3 (slides)
     traj = _blocks(jnp.asarray(theta), jnp.asarray(mu))
+    assert np.all(np.asarray(traj.result._value) == jaxrb.RESULTS.successful._value)
     k = int(steep)
     t = np.asarray(TS)
     n = np.array([np.sin(theta[k]), 0.0, np.cos(theta[k])])

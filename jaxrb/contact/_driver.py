@@ -18,7 +18,7 @@ import numpy as np
 from .._checks import is_concrete
 from .._inputs import input_result, safe_times
 from .._quaternion import quat_normalize
-from .._results import RESULTS
+from .._results import RESULTS, raise_if_failed
 from .._shapes import Sphere
 from .._solve import checks_without_host_callbacks
 from .._state import State
@@ -139,7 +139,7 @@ def simulate_contact(
             settings_ok,
         )
     if throw:  # outside the compiled program: throw=True and False share one compilation
-        traj = traj.result.error_if(traj, traj.result != RESULTS.successful)
+        traj = raise_if_failed(traj)
     return traj
 
 

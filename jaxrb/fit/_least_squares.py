@@ -37,6 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._results import RESULTS
+from .._solve import checks_without_host_callbacks
 
 DEFAULT_COND_WARN = 1e8
 
@@ -308,9 +309,13 @@ def least_squares_fit(
             raise ValueError(f"{name} must be a finite number >= 0, got {tol}")
     if int(max_steps) != max_steps or max_steps < 0:
         raise ValueError(f"max_steps must be an integer >= 0, got {max_steps}")
-    state, values_flat, grad_phys = _solve(
-        fn, to_physical, z0, jnp.asarray(rtol), jnp.asarray(atol), jnp.asarray(int(max_steps))
-    )
+    # compiled (traced, differentiated and lowered) inside the scope: the derivative of each
+    # event time carries a checked linear solve, whose host callback would keep the
+    # program out of JAX's persistent cache
+    with checks_without_host_callbacks():
+        state, values_flat, grad_phys = _solve(
+            fn, to_physical, z0, jnp.asarray(rtol), jnp.asarray(atol), jnp.asarray(int(max_steps))
+        )
     r, jac, grad_phys = np.asarray(state.r), np.asarray(state.jac), np.asarray(grad_phys)
     values_flat = [np.asarray(v) for v in values_flat]
     reason = _CODES[int(state.reason) - 1]
