@@ -134,13 +134,16 @@ MIN_BATCH = 3  # smaller batches are padded to this size: one compiled program s
 
 
 def runs(v0, drag, rolling, t_end):
-    """`_runs` with a batch of fewer than MIN_BATCH members padded (by repeating the last)."""
+    """`_runs` with a batch of fewer than MIN_BATCH members padded (by repeating the last).
+    The inputs become plain float64 arrays (no weak types, e.g. from `jnp.full(n, 0.1)`), so
+    that the sweep, the tracked data and the predictions share one compiled program."""
+    v0, drag, rolling, t_end = (np.asarray(x, np.float64) for x in (v0, drag, rolling, t_end))
     n = np.shape(v0)[0]
     pad = lambda x: jnp.concatenate(
         [jnp.asarray(x), jnp.repeat(jnp.asarray(x)[-1:], MIN_BATCH - n)]
     )  # noqa: E731
     if n >= MIN_BATCH:
-        return _runs(v0, drag, rolling, t_end)
+        return _runs(*(jnp.asarray(x) for x in (v0, drag, rolling, t_end)))
     out = _runs(pad(v0), pad(drag), pad(rolling), pad(t_end))
     return jax.tree.map(lambda x: x[:n], out)
 
