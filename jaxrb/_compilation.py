@@ -66,11 +66,10 @@ def speed_up_compilation(
     equinox checks return NaN too.
     """
     if nan_checks and "EQX_ON_ERROR" not in os.environ:
-        import equinox as eqx
+        from ._solve import equinox_checks_mode, set_equinox_checks
 
-        errors = getattr(eqx, "_errors", None)
-        if getattr(errors, "EQX_ON_ERROR", None) == "raise":
-            errors.EQX_ON_ERROR = "nan"
+        if equinox_checks_mode() == "raise":
+            set_equinox_checks("nan")
     flags = os.environ.get("XLA_FLAGS", "")
     if "xla_cpu_use_fusion_emitters" not in flags and not _backend_started():
         os.environ["XLA_FLAGS"] = f"{flags} {CPU_FLAG}".strip()

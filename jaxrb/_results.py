@@ -3,6 +3,8 @@
 import diffrax as dfx
 import equinox as eqx
 
+from ._solve import equinox_checks_mode
+
 
 class RESULTS(dfx.RESULTS):  # pyright: ignore
     """`simulate`'s outcome. `RESULTS.successful` or the first problem found.
@@ -59,8 +61,7 @@ def raise_if_failed(traj):
     `successful` (at run time where the code is traced; for a batch, one member's message).
     Raises whatever equinox's `EQX_ON_ERROR` says (`nan` makes equinox's own checks quiet,
     and `throw=True` must not be), except that `breakpoint` is kept for debugging."""
-    errors = getattr(eqx, "_errors", None)
-    on_error = "default" if getattr(errors, "EQX_ON_ERROR", None) == "breakpoint" else "raise"
+    on_error = "default" if equinox_checks_mode() == "breakpoint" else "raise"
     result = traj.result
     return eqx.branched_error_if(
         traj,

@@ -45,21 +45,28 @@ def checks_without_host_callbacks():
     traced again whenever a program is lowered: the kept checks are dropped on entering and
     on leaving, so that neither form leaks into programs traced or lowered on the other side
     of the scope."""
-    errors = getattr(eqx, "_errors", None)
-    if getattr(errors, "EQX_ON_ERROR", None) != "raise":
+    if equinox_checks_mode() != "raise":
         yield
         return
-    errors.EQX_ON_ERROR = "nan"
-    _forget_traced_checks(errors)
+    set_equinox_checks("nan")
     try:
         yield
     finally:
-        errors.EQX_ON_ERROR = "raise"
-        _forget_traced_checks(errors)
+        set_equinox_checks("raise")
 
 
-def _forget_traced_checks(errors) -> None:
-    """Drop the traces equinox keeps of its run-time check (cheap to trace again)."""
+def equinox_checks_mode() -> str | None:
+    """How equinox's run-time checks are traced now (its `EQX_ON_ERROR`: "raise", "nan",
+    "breakpoint" or "off"); None for an equinox without that setting."""
+    return getattr(getattr(eqx, "_errors", None), "EQX_ON_ERROR", None)
+
+
+def set_equinox_checks(mode: str) -> None:
+    """Trace equinox's run-time checks in `mode` from now on, and drop the traces equinox
+    keeps of its check (per array shapes; cheap to trace again), so that none traced in the
+    other mode is reused."""
+    errors = eqx._errors
+    errors.EQX_ON_ERROR = mode
     cached = getattr(getattr(errors, "branched_error_if_impl_jit", None), "_cached", None)
     if hasattr(cached, "clear_cache"):
         cached.clear_cache()
