@@ -27,7 +27,9 @@ atan(h / d) (a third at h / d = 1 / sqrt(3) = 0.577). The bouncing coin of Murra
 (1993, Phys. Rev. E 48, 2547) lands on its side less often: about 1 in 6000 for an American
 nickel (h / d = 0.092).
 
-One throw per compiled call through `jaxrb.sweep` (`rtol = atol = 1e-8`, `max_impacts` 100).
+One throw per compiled call through `jaxrb.sweep` (`rtol = atol = 1e-8`, `max_impacts` 100);
+`--chunk K` runs K throws per call instead (vmapped in lockstep: the way to use a GPU), and
+`--rows DIR` keeps each finished chunk in DIR, so that a run stopped part-way resumes there.
 
 Writes `thick_coin.md`, `thick_coin.png` and `thick_coin.npz` to `--out`; existing files
 are kept unless `--force`.
@@ -134,10 +136,10 @@ def study_rows(ratios, n, seed=2):
     )
 
 
-def study(ratios, n, t_end, seed=2):
+def study(ratios, n, t_end, seed=2, chunk=1, rows_dir=None):
     R = len(ratios)
     rows = study_rows(ratios, n, seed)
-    out = jaxrb.sweep(make_throw(t_end), rows, chunk_size=1, progress=True)
+    out = jaxrb.sweep(make_throw(t_end), rows, chunk_size=chunk, directory=rows_dir, progress=True)
     return {k: np.asarray(v).reshape((R, n) + v.shape[1:]) for k, v in out.items()}
 
 
@@ -191,12 +193,14 @@ def main(argv=None):
     p.add_argument("--t-end", type=float, default=4.0, help="s, when the outcome is read")
     p.add_argument("--out", default="bench_out")
     p.add_argument("--force", action="store_true", help="replace existing result files")
+    p.add_argument("--chunk", type=int, default=1, help="throws per compiled (vmapped) call")
+    p.add_argument("--rows", default=None, help="keep finished chunks here (a rerun resumes)")
     a = p.parse_args(argv)
     ratios = [float(x) for x in a.ratios.split(",")]
     names = ["thick_coin.md", "thick_coin.png", "thick_coin.npz"]
     paths = C.output_paths(p, a.out, names, a.force)
     t0 = time.perf_counter()
-    out = study(ratios, a.n, a.t_end)
+    out = study(ratios, a.n, a.t_end, chunk=a.chunk, rows_dir=a.rows)
     wall = time.perf_counter() - t0
     settled, side, freq, lo, hi, stopped = summary(ratios, out)
     np.savez(paths[2], ratios=ratios, **out)
