@@ -41,6 +41,7 @@ from ._forces import (
 )
 from ._invariants import angular_momentum as angular_momentum, energy as energy
 from ._joints import AbstractJoint as AbstractJoint, Hinge as Hinge, Pivot as Pivot
+from ._persistent import persistent_jit as persistent_jit
 from ._polyhedron import ConvexPolyhedron as ConvexPolyhedron
 from ._quaternion import (
     axis_angle_to_quat as axis_angle_to_quat,

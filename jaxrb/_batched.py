@@ -23,6 +23,7 @@ import numpy as np
 from ._checks import all_met, is_concrete
 from ._coordinates import ROTATION, coordinates_for
 from ._inputs import check_concrete_inputs, check_solver_settings, input_result, safe_times
+from ._persistent import entry_point
 from ._results import RESULTS, raise_if_failed
 from ._solve import DEFAULT_MAX_STEPS, default_solver, solve
 from ._state import State
@@ -64,7 +65,7 @@ def _where_members(valid, tree, other):
     )
 
 
-@eqx.filter_jit
+@entry_point
 def simulate_batched(
     scene,
     states0,

@@ -10,7 +10,11 @@ program's entry point (the `jaxrb` command line calls it, and so can a script or
   four fifths of the time and run no slower (measured on a 2-core x86 CPU: a die's
   program 55 s -> 43 s of compile CPU time, its 16 s throw about 0.23 s either way);
 - optionally (`nan_checks`), equinox's run-time checks without host callbacks, so that
-  derivative programs compiled by the caller's own `jax.jit` can be cached too.
+  derivative programs compiled by the caller's own `jax.jit` can be cached too;
+- jaxrb's traced programs (`programs`): the persistent cache still needs every program
+  traced before it can look it up, and tracing a contact simulation takes longer than
+  loading its compiled code; `persistent_jit` keeps the traced programs of jaxrb's own
+  entry points beside the compiled ones.
 """
 
 import os
@@ -44,7 +48,7 @@ def _backend_started() -> bool:
 
 
 def speed_up_compilation(
-    cache: bool = True, cache_dir=None, nan_checks: bool = False
+    cache: bool = True, cache_dir=None, nan_checks: bool = False, programs: bool = True
 ) -> Path | None:
     """Turn on the persistent compilation cache (if `cache`) in `cache_dir` (default
     `default_cache_dir()`; a contact scene's program takes 0.5-2 MB there, and nothing is
@@ -64,6 +68,13 @@ def speed_up_compilation(
     `jax.jit`, e.g. `jax.jit(jax.grad(loss))` of a loss that calls `simulate`. A failed
     solve is still flagged in jaxrb's result codes, and `throw=True` still raises; your own
     equinox checks return NaN too.
+
+    `programs=True` (with `cache`; `cache=False` turns it off) also keeps the traced
+    programs of jaxrb's own entry points (`simulate`, `simulate_throws`, `simulate_batch`,
+    the fits) in `cache_dir / "programs"`, so that a later process loads them instead of
+    tracing (`persistent_jit`; a call whose scene holds a class defined outside jaxrb, e.g.
+    your own force, is traced as usual). The key holds jaxrb's source, so an edit or
+    another version traces again.
     """
     if nan_checks and "EQX_ON_ERROR" not in os.environ:
         from ._solve import equinox_checks_mode, set_equinox_checks
@@ -74,10 +85,17 @@ def speed_up_compilation(
     if "xla_cpu_use_fusion_emitters" not in flags and not _backend_started():
         os.environ["XLA_FLAGS"] = f"{flags} {CPU_FLAG}".strip()
     if not cache:
+        from ._persistent import keep_programs
+
+        keep_programs(False)
         return None
     directory = Path(cache_dir).expanduser() if cache_dir is not None else default_cache_dir()
     directory.mkdir(parents=True, exist_ok=True)
     jax.config.update("jax_compilation_cache_dir", str(directory))
+    if programs:
+        from ._persistent import keep_programs
+
+        keep_programs(True, directory / "programs")
     # programs quicker to compile than this are not worth a file
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
     return directory

@@ -21,6 +21,7 @@ from ._inputs import (
     save_times,
     solver_settings_ok,
 )
+from ._persistent import entry_point
 from ._results import RESULTS, raise_if_failed
 from ._solve import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, default_solver, solve
 from ._state import State
@@ -213,7 +214,7 @@ def _vmap_members(fn, states0):
     return eqx.tree_at(lambda t: t.ts, traj, traj.ts[0])
 
 
-@eqx.filter_jit
+@entry_point
 def _simulate_smooth(
     scene,
     state0,

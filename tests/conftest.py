@@ -27,6 +27,9 @@ _CACHE = Path(
 os.environ["JAXRB_CACHE_DIR"] = str(_CACHE)
 os.environ["JAX_COMPILATION_CACHE_DIR"] = str(_CACHE)
 os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0.5"
+# jaxrb's traced programs too (`jaxrb.persistent_jit`), in the same folder's `programs`: the
+# command line and the notebooks' kernels keep them through this variable
+os.environ["JAXRB_PROGRAMS"] = "1"
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "strict")

@@ -1,12 +1,11 @@
 """Dice and coins on the floor: random throws (no penetration, energy never rises, a die at
 rest on a face), vmap against the loop, sliding on a face, bad input, float32."""
 
-import functools
-
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from programs import persistent
 
 import jaxrb
 
@@ -34,7 +33,7 @@ def _throw(omega=(5.0, -8.0, 3.0), vel=(0.3, 0.0, 0.0), z=0.1):
     return jaxrb.make_state(pos=(0.0, 0.0, z), quat=q, vel=vel, omega=omega)
 
 
-@jax.jit
+@persistent
 def _die_run(scene, state0, ts):
     return jaxrb.simulate(scene, state0, ts, throw=False, max_impacts=24)
 
@@ -52,7 +51,7 @@ def test_elastic_die_conserves_energy_over_20_impacts():
     assert float(jnp.min(dist)) > -1e-9  # no penetration
 
 
-@functools.partial(jax.jit, static_argnames="coin")
+@persistent(static_argnames="coin")
 def _settle_batch(omegas, quats, vels, coin):
     shape = jaxrb.Cylinder(0.012, 0.001) if coin else jaxrb.Box((A_DIE, A_DIE, A_DIE))
     scene = _tumbler(shape, 0.5, 0.3)
@@ -107,6 +106,12 @@ def test_tumbling_die_and_coin(coin, getkey):
     np.testing.assert_allclose(np.asarray(batch.states.pos[:, -1, 2]), A_DIE, atol=1e-9)
 
 
+@persistent
+def _die_batch(scene, omegas, heights, ts):
+    """`_die_run` of each (spin, height) under `jax.vmap`."""
+    return jax.vmap(lambda w, z: _die_run(scene, _throw(omega=w, z=z), ts))(omegas, heights)
+
+
 def test_die_batch_vmap_equals_per_member(getkey):
     """64 dice thrown with different spins bounce different numbers of times under vmap."""
     scene = _tumbler(jaxrb.Box((A_DIE, A_DIE, A_DIE)), 0.6, 0.3)
@@ -117,7 +122,7 @@ def test_die_batch_vmap_equals_per_member(getkey):
     def run(omega, z):
         return _die_run(scene, _throw(omega=omega, z=z), ts)
 
-    batch = jax.vmap(run)(omegas, heights)
+    batch = _die_batch(scene, omegas, heights, ts)
     counts = np.asarray(batch.impacts.count)
     assert len(set(counts.tolist())) > 1  # members bounce different numbers of times
 
@@ -183,7 +188,7 @@ def test_throws_in_refilled_lanes_equal_per_throw_runs(getkey):
 # ------------------------------------------------------------------ sliding contact
 
 
-@jax.jit
+@persistent
 def _slide_run(scene, state0, ts):
     return jaxrb.simulate(scene, state0, ts, throw=False, rtol=1e-12, atol=1e-12)
 
@@ -268,6 +273,19 @@ def test_die_slides_to_rest_on_its_face():
         np.testing.assert_allclose(yaw, end[4], rtol=0, atol=1e-8)
 
 
+def _sliding_start(v, wz):
+    """A die on its face moving at (v, 0) m/s and spinning at wz rad/s about the vertical."""
+    return jaxrb.make_state(
+        pos=(0.0, 0.0, A_DIE), vel=jnp.stack([v[0], v[1], 0.0]), omega=jnp.stack([0, 0, wz])
+    )
+
+
+@persistent
+def _slide_batch(scene, vs, wzs, ts):
+    """`_slide_run` of each (velocity, spin) under `jax.vmap`."""
+    return jax.vmap(lambda v, wz: _slide_run(scene, _sliding_start(v, wz), ts))(vs, wzs)
+
+
 def test_sliding_dice_with_drag_batch_equals_per_member(getkey):
     """Drag turns the slip direction while a die slides on its face; sliding must still end
     cleanly (no creeping onto the Coulomb discontinuity) for every member under vmap."""
@@ -275,14 +293,11 @@ def test_sliding_dice_with_drag_batch_equals_per_member(getkey):
     ts = jnp.linspace(0.0, 1.0, 5)
 
     def run(v, wz):
-        state0 = jaxrb.make_state(
-            pos=(0.0, 0.0, A_DIE), vel=jnp.stack([v[0], v[1], 0.0]), omega=jnp.stack([0, 0, wz])
-        )
-        return _slide_run(scene, state0, ts)
+        return _slide_run(scene, _sliding_start(v, wz), ts)
 
     vs = jax.random.normal(getkey(), (6, 2)) * 0.5
     wzs = jax.random.normal(getkey(), (6,)) * 40.0
-    batch = jax.vmap(run)(vs, wzs)
+    batch = _slide_batch(scene, vs, wzs, ts)
     assert np.all(np.asarray(batch.result._value) == jaxrb.RESULTS.successful._value)
     # every die sticks at the end, its velocity at the level of the constraint stabilisation
     # acting on the projection's ~1e-12 m residual (a creeping slip would be ~slip_stop, 1e-5)

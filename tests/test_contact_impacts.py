@@ -2,13 +2,12 @@
 the multi-point impact law (energy, friction cone, numbering), tumbling dice and coins,
 vmap batches and bad input."""
 
-import functools
-
 import diffrax as dfx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from programs import persistent
 
 import jaxrb
 from jaxrb.analytic import ball_apex_heights, ball_height, ball_impact_times, ball_rest_time
@@ -26,7 +25,7 @@ def _ball_scene(e, mu=0.0):
     return jaxrb.Scene(body, forces=(jaxrb.Gravity(),), floor=jaxrb.Floor(e, mu))
 
 
-@functools.partial(jax.jit, static_argnames=("throw", "forward_mode"))
+@persistent(static_argnames=("throw", "forward_mode"))
 def _ball_run(h0, v0, e, ts, throw=False, forward_mode=False):
     state0 = jaxrb.make_state(
         pos=jnp.stack([0.0 * h0, 0.0 * h0, h0 + R_BALL]), vel=jnp.stack([0.0 * v0, 0.0 * v0, v0])
@@ -81,7 +80,7 @@ def _height_at(params, T, forward_mode=False):
 
 
 # forward mode, one compilation for every T (reverse mode: the friction tests below)
-_height_grad = jax.jit(jax.jacfwd(lambda p, T: _height_at(p, T, forward_mode=True)))
+_height_grad = persistent(jax.jacfwd(lambda p, T: _height_at(p, T, forward_mode=True)))
 
 
 def test_ball_gradients_across_impacts():
@@ -121,8 +120,8 @@ def _spin_ball_final(params):
     return jnp.stack([s.pos[-1, 0], s.pos[-1, 2], s.vel[-1, 0], s.omega[-1, 1]]), traj.impacts.count
 
 
-_spin_ball_jacobian = jax.jit(jax.jacrev(lambda p: _spin_ball_final(p)[0]))
-_spin_ball = jax.jit(_spin_ball_final)
+_spin_ball_jacobian = persistent(jax.jacrev(lambda p: _spin_ball_final(p)[0]))
+_spin_ball = persistent(_spin_ball_final)
 
 
 @pytest.mark.parametrize("mu", [0.2, 0.6], ids=["sliding", "sticking"])

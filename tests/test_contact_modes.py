@@ -3,13 +3,12 @@ planar rocking equation), a die pivoting on an edge (the pivot equation), a coin
 its rim (the rolling-disc equations derived with sympy's Kane's method), and the reported
 penetration / energy-gain cases."""
 
-import functools
-
 import diffrax as dfx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from programs import persistent
 from scipy.integrate import solve_ivp
 
 import jaxrb
@@ -27,7 +26,7 @@ def _box(half, mass, e, mu, state0, ts, rest_speed=1e-6, forward_mode=False):
     return _box_run(half, mass, e, mu, state0, ts, rest_speed, forward_mode)
 
 
-@functools.partial(jax.jit, static_argnums=(6, 7))
+@persistent(static_argnames=("rest_speed", "forward_mode"))
 def _box_run(half, mass, e, mu, state0, ts, rest_speed, forward_mode):
     body = jaxrb.RigidBody(mass, shape=jaxrb.Box(half))
     scene = jaxrb.Scene(body, forces=(jaxrb.Gravity(),), floor=jaxrb.Floor(e, mu))
@@ -155,6 +154,9 @@ def _second_impact_time(b, forward_mode=False):
     return _box(half, m, 0.0, 2.0, state0, ts, forward_mode=forward_mode).impacts.time[1]
 
 
+_second_impact_time_grad = persistent(jax.jacfwd(lambda b: _second_impact_time(b, True)))
+
+
 def test_rocking_block_gradient_of_second_impact_time():
     """d(second impact time)/d(half-width) through two impacts and the rocking between them,
     against central differences (1e-5). Forward mode (quicker to compile than reverse mode;
@@ -162,7 +164,7 @@ def test_rocking_block_gradient_of_second_impact_time():
     b = 0.05
     t2 = float(_second_impact_time(jnp.asarray(b)))
     assert 0.3 < t2 < 1.2
-    grad = float(jax.jacfwd(lambda b: _second_impact_time(b, True))(jnp.asarray(b)))
+    grad = float(_second_impact_time_grad(jnp.asarray(b)))
     eps = 1e-5
     fd = (
         float(_second_impact_time(jnp.asarray(b + eps)))
@@ -182,7 +184,7 @@ def _coin_scene(mu, damping):
     return jaxrb.Scene(body, forces=forces, floor=jaxrb.Floor(0.5, mu))
 
 
-@jax.jit
+@persistent
 def _coin_run(mu, damping, state0, ts):
     """One compilation for every coin test (a rolling coin has many stick/slip events)."""
     options = jaxrb.contact.ContactOptions(max_impacts=64, max_events=1500)
@@ -282,7 +284,7 @@ def _slipping_coin(params, start):
 
 
 # value and directional derivative in one compilation (central differences reuse the value)
-_slipping_coin_jvp = jax.jit(
+_slipping_coin_jvp = persistent(
     lambda p, v, start: jax.jvp(lambda q: _slipping_coin(q, start), (p,), (v,), has_aux=True)
 )
 

@@ -20,6 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from programs import persistent
 from scipy.special import ellipj, ellipk
 
 import jaxrb
@@ -36,7 +37,7 @@ def bowl_scene(radius, restitution, friction):
     return jaxrb.Scene(body, (jaxrb.Gravity(),), floor=bowl)
 
 
-@jax.jit
+@persistent
 def _in_bowl(radius, restitution, friction, pos):
     def one(radius, e, mu, pos):
         scene = bowl_scene(radius, e, mu)
@@ -133,7 +134,7 @@ def test_an_invalid_bowl_is_flagged_per_member_under_vmap(bowl_runs):
 D_CONE, R_CONE_BALL = 0.3, 0.01
 
 
-@jax.jit
+@persistent
 def _on_cone(tip_radius, state0, ts):
     def one(tip_radius, state0, ts):
         body = jaxrb.RigidBody(0.05, shape=jaxrb.Sphere(R_CONE_BALL))

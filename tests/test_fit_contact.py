@@ -49,8 +49,9 @@ def tracked_ball():
 
 
 def _cache_size():
-    size = getattr(_solve._cached, "_cache_size", None)
-    return None if size is None else size()
+    """Programs of the fit's solver traced or loaded in this process."""
+    size = getattr(_solve.plain._cached, "_cache_size", None)
+    return None if size is None else size() + len(_solve.kept)
 
 
 def test_contact_fit_from_tracked_trajectory(tracked_ball):

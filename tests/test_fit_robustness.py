@@ -46,8 +46,9 @@ def _diagonal_starts(count, seed=0):
 
 
 def _cache_size():
-    size = getattr(_solve._cached, "_cache_size", None)
-    return None if size is None else size()
+    """Programs of the fit's solver traced or loaded in this process."""
+    size = getattr(_solve.plain._cached, "_cache_size", None)
+    return None if size is None else size() + len(_solve.kept)
 
 
 def test_random_diagonal_starts(omega_data):

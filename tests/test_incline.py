@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from programs import persistent
 
 import jaxrb
 
@@ -30,7 +31,7 @@ def incline(theta, restitution, mu):
     return jaxrb.Floor(restitution, mu, normal=normal)
 
 
-@jax.jit
+@persistent
 def _balls(theta, restitution, mu, lift):
     def one(theta, e, mu, lift):
         floor = incline(theta, e, mu)
@@ -44,7 +45,7 @@ def _balls(theta, restitution, mu, lift):
     return jax.vmap(one)(theta, restitution, mu, lift)
 
 
-@jax.jit
+@persistent
 def _blocks(theta, mu):
     def one(theta, mu):
         floor = incline(theta, 0.3, mu)

@@ -20,6 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from programs import persistent
 from scipy.integrate import solve_ivp
 
 import jaxrb
@@ -64,7 +65,7 @@ def rod_state(theta, u, theta_dot):
     return jaxrb.make_state(pos=pos, quat=q, vel=vel, omega=omega)
 
 
-@jax.jit
+@persistent
 def _rods(mu, theta, u, theta_dot):
     ts = jnp.linspace(0.0, T_END, SAVES)
 

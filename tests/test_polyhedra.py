@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from programs import persistent
 
 import jaxrb
 from jaxrb import dice
@@ -177,7 +178,7 @@ def test_polyhedron_face_support_regions():
 THROWS = 3
 
 
-@jax.jit
+@persistent
 def _throw_d12(omegas, quats, vels):
     die = dice.d12()
     scene = jaxrb.Scene(

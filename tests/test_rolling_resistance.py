@@ -15,6 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from programs import persistent
 
 import jaxrb
 
@@ -28,7 +29,7 @@ def ball_scene(theta, mu_r, mu_s):
     return jaxrb.Scene(jaxrb.RigidBody(M, shape=jaxrb.Sphere(R)), (jaxrb.Gravity(),), floor=floor)
 
 
-@jax.jit
+@persistent
 def _rolling(theta, mu_r, mu_s, v0, spin):
     def one(theta, mu_r, mu_s, v0, spin):
         scene = ball_scene(theta, mu_r, mu_s)

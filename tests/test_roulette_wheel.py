@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from programs import persistent
 
 import jaxrb
 
@@ -49,6 +50,7 @@ def sliding_closed_form(k=DRAG, v0=V0):
     return lambda t: v0 / (1 + k * v0 * t / MASS), MASS / k * (1 / v_leave - 1 / v0)
 
 
+@persistent
 def _on_wheel(friction, rolling, wall_radius, state0, ts):
     def one(friction, rolling, wall_radius, state0, ts):
         body = jaxrb.RigidBody(MASS, shape=jaxrb.Sphere(R_BALL))

@@ -21,6 +21,7 @@ laws of the cited analyses never stick and carry it on to 180 degrees.
 import jax
 import jax.numpy as jnp
 import numpy as np
+from programs import persistent
 
 import jaxrb
 
@@ -52,7 +53,7 @@ def spun_upright():
     )
 
 
-@jax.jit
+@persistent
 def _spin(ratios):
     def one(ratio):
         return jaxrb.simulate(

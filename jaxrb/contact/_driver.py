@@ -17,6 +17,7 @@ import numpy as np
 
 from .._checks import is_concrete
 from .._inputs import input_result, safe_times
+from .._persistent import entry_point
 from .._quaternion import quat_normalize
 from .._results import RESULTS, raise_if_failed
 from .._shapes import Sphere
@@ -416,7 +417,7 @@ def contact_program(
     )
 
 
-@eqx.filter_jit
+@entry_point
 def _simulate_contact(
     scene,
     state0,

@@ -17,6 +17,7 @@ import jax.numpy as jnp
 
 from .._checks import as_float_array
 from .._inputs import default_controller, save_times, solver_settings_ok
+from .._persistent import entry_point
 from .._state import State
 from ._driver import check_contact_scene, contact_program
 from ._options import ContactOptions
@@ -114,7 +115,7 @@ def simulate_throws(
     )
 
 
-@eqx.filter_jit
+@entry_point
 def _throws(
     scene,
     states0,

@@ -31,11 +31,11 @@ import warnings
 from collections.abc import Callable
 from typing import NamedTuple
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._persistent import entry_point
 from .._results import RESULTS
 from .._solve import checks_without_host_callbacks
 
@@ -156,7 +156,7 @@ def _code(name: str) -> int:
     return 1 + _CODES.index(name)
 
 
-@eqx.filter_jit
+@entry_point
 def _solve(fn, to_physical, z0, rtol, atol, max_steps):
     """Levenberg–Marquardt from `z0` (see the module docstring); one compiled evaluation of
     the residuals and their Jacobian (forward mode) per trial point."""

@@ -1,0 +1,120 @@
+"""`jaxrb.persistent_jit`: a traced program is kept on disk and loaded by a later caller
+instead of tracing again; anything that could make a kept program stale changes its key or
+keeps it off the disk."""
+
+import importlib.util
+import sys
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxrb
+
+TRACES = []
+
+
+def _model(x, y, power):
+    TRACES.append(power)  # runs only while tracing
+    return {"sum": jnp.sum(x**power) + y, "scaled": x * y}
+
+
+class _Wrapped(eqx.Module):
+    a: jax.Array
+    label: str = eqx.field(static=True)
+
+
+def _with_module(m):
+    TRACES.append(m.label)
+    return m.a * 2.0
+
+
+def _load(tmp_path, name, source):
+    path = tmp_path / f"{name}.py"
+    path.write_text(source)
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_a_kept_program_is_loaded_without_tracing_and_gives_the_same_result(tmp_path):
+    x, y = jnp.arange(3.0), jnp.asarray(2.0)
+    first = jaxrb.persistent_jit(_model, cache_dir=tmp_path)
+    TRACES.clear()
+    out = first(x, y, 3)
+    assert TRACES == [3]
+    assert len(list(tmp_path.glob("*.bin"))) == 1
+    # a new wrapper (as in a new process) reads the file and does not trace
+    second = jaxrb.persistent_jit(_model, cache_dir=tmp_path)
+    again = second(x, y, 3)
+    assert TRACES == [3]
+    assert set(again) == {"sum", "scaled"}
+    np.testing.assert_array_equal(again["sum"], out["sum"])
+    np.testing.assert_array_equal(again["scaled"], jnp.array([0.0, 2.0, 4.0]))
+    assert float(again["sum"]) == 0.0 + 1.0 + 8.0 + 2.0
+    # another static value or another shape is another program
+    second(x, y, 2)
+    second(jnp.arange(4.0), y, 3)
+    assert TRACES == [3, 2, 3]
+    assert len(list(tmp_path.glob("*.bin"))) == 3
+    # under a transformation the call is equinox.filter_jit's (no file)
+    g = jax.grad(lambda x: second(x, y, 3)["sum"])(x)
+    np.testing.assert_allclose(g, 3 * x**2)
+    assert len(list(tmp_path.glob("*.bin"))) == 3
+
+
+def test_modules_keep_their_static_fields_in_the_key(tmp_path):
+    f = jaxrb.persistent_jit(_with_module, cache_dir=tmp_path)
+    TRACES.clear()
+    f(_Wrapped(jnp.ones(2), "a"))
+    f(_Wrapped(jnp.ones(2), "b"))
+    g = jaxrb.persistent_jit(_with_module, cache_dir=tmp_path)
+    np.testing.assert_array_equal(g(_Wrapped(jnp.ones(2), "b")), [2.0, 2.0])
+    assert TRACES == ["a", "b"]
+
+
+def test_an_edited_source_file_traces_again(tmp_path):
+    store = tmp_path / "programs"
+    one = _load(tmp_path, "persistent_edit_one", "def f(x):\n    return x + 1.0\n")
+    assert float(jaxrb.persistent_jit(one.f, cache_dir=store)(jnp.asarray(1.0))) == 2.0
+    two = _load(tmp_path, "persistent_edit_one", "def f(x):\n    return x + 10.0\n")
+    assert float(jaxrb.persistent_jit(two.f, cache_dir=store)(jnp.asarray(1.0))) == 11.0
+    assert len(list(store.glob("*.bin"))) == 2
+
+
+def test_what_cannot_be_keyed_is_traced_as_usual(tmp_path):
+    data = jnp.arange(3.0)
+
+    def closes_over_an_array(x):
+        return x * data
+
+    np.testing.assert_array_equal(
+        jaxrb.persistent_jit(closes_over_an_array, cache_dir=tmp_path)(jnp.ones(3)), data
+    )
+    # a function from outside the files the key covers, passed as a static argument
+    namespace = {}
+    exec("def outside(x):\n    return x * 3.0\n", namespace)  # noqa: S102
+
+    def apply(fn, x):
+        return fn(x)
+
+    np.testing.assert_array_equal(
+        jaxrb.persistent_jit(apply, cache_dir=tmp_path)(namespace["outside"], jnp.ones(2)),
+        [3.0, 3.0],
+    )
+    assert list(tmp_path.glob("*.bin")) == []
+
+
+def test_a_program_with_a_host_callback_is_traced_as_usual_with_a_warning(tmp_path):
+    def prints(x):
+        jax.debug.print("x = {}", x)
+        return x + 1.0
+
+    with pytest.warns(UserWarning, match="traced as usual"):
+        out = jaxrb.persistent_jit(prints, cache_dir=tmp_path)(jnp.asarray(1.0))
+    assert float(out) == 2.0
+    assert list(tmp_path.glob("*.bin")) == []
