@@ -11,7 +11,8 @@ The key is a SHA-256 of: the source of the `jaxrb` package, the file that define
 files and folders named in `sources`, `fn`'s name, the static part of the arguments (every
 leaf that is not an array, as `equinox.filter_jit` splits them), the shapes and dtypes of
 the array leaves, the versions of JAX, jaxlib, equinox, diffrax, optimistix and lineax, and
-the settings that change a trace (`jax_enable_x64`, the dtype promotion, `EQX_ON_ERROR`).
+the settings that change a trace (`jax_enable_x64`, the dtype promotion, how equinox's
+checks are traced now).
 Values `fn` closes over are keyed like static arguments. So the contract is: `fn` is a pure
 function of its arguments and of the code in those files; a global value it reads must not
 change between runs. Where the key cannot be made stable (a text naming a memory address, a
@@ -273,6 +274,7 @@ def _one_device(leaves) -> bool:
 
 def _key(fn, static, in_tree, leaves, sources) -> str | None:
     from . import __file__ as package_init
+    from ._solve import equinox_checks_mode
 
     paths = (str(Path(package_init).parent),) + _source_files(fn)
     paths += tuple(str(Path(s).resolve()) for s in sources)
@@ -293,7 +295,7 @@ def _key(fn, static, in_tree, leaves, sources) -> str | None:
         str(jax.config.jax_numpy_dtype_promotion),
         str(jax.config.jax_numpy_rank_promotion),
         str(jax.config.jax_default_matmul_precision),
-        os.environ.get("EQX_ON_ERROR", ""),
+        str(equinox_checks_mode()),  # as traced now: jaxrb's calls trace them as NaN
         jax.default_backend(),
     ):
         h.update(part.encode())

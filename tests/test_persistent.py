@@ -77,6 +77,27 @@ def test_modules_keep_their_static_fields_in_the_key(tmp_path):
     assert TRACES == ["a", "b"]
 
 
+def test_equinox_checks_mode_is_in_the_key(tmp_path):
+    """A program traced with equinox's checks as NaN is not loaded where they raise."""
+    from jaxrb._solve import equinox_checks_mode, set_equinox_checks
+
+    def checked(x):
+        return eqx.error_if(x, x < 0, "negative")
+
+    before = equinox_checks_mode()
+    try:
+        set_equinox_checks("nan")
+        f = jaxrb.persistent_jit(checked, cache_dir=tmp_path)
+        assert np.isnan(float(f(jnp.asarray(-1.0))))
+        set_equinox_checks("raise")
+        with pytest.warns(UserWarning, match="traced as usual"):  # a host callback now
+            with pytest.raises(Exception, match="negative"):
+                jaxrb.persistent_jit(checked, cache_dir=tmp_path)(jnp.asarray(-1.0))
+    finally:
+        set_equinox_checks(before)
+    assert len(list(tmp_path.glob("*.bin"))) == 1
+
+
 def test_an_edited_source_file_traces_again(tmp_path):
     store = tmp_path / "programs"
     one = _load(tmp_path, "persistent_edit_one", "def f(x):\n    return x + 1.0\n")
