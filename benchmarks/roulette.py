@@ -134,43 +134,33 @@ MIN_BATCH = 3  # smaller batches are padded to this size: one compiled program s
 
 
 def runs(v0, drag, rolling, t_end):
-    """`_runs` with a batch of fewer than MIN_BATCH members padded (by repeating the last).
-    The inputs become plain float64 arrays (no weak types, e.g. from `jnp.full(n, 0.1)`), so
-    that the sweep, the tracked data and the predictions share one compiled program."""
-    v0, drag, rolling, t_end = (np.asarray(x, np.float64) for x in (v0, drag, rolling, t_end))
-    n = np.shape(v0)[0]
-    pad = lambda x: jnp.concatenate(
-        [jnp.asarray(x), jnp.repeat(jnp.asarray(x)[-1:], MIN_BATCH - n)]
-    )  # noqa: E731
-    if n >= MIN_BATCH:
-        return _runs(*(jnp.asarray(x) for x in (v0, drag, rolling, t_end)))
-    out = _runs(pad(v0), pad(drag), pad(rolling), pad(t_end))
-    return jax.tree.map(lambda x: x[:n], out)
-
-
-@eqx.filter_jit
-def _runs(v0, drag, rolling, t_end):
     """Balls launched at `v0` (N,) with drag `drag` (N,) and rolling resistance `rolling`
-    (N,), saved at SAVES times in [0, t_end] (N,): (lift-off time (N,), unwrapped azimuth at
-    the saves (N, SAVES), result codes (N,)). The lift-off time is the first event that ends
-    the two-point contact (inf if none before t_end)."""
+    (N,), saved at SAVES times in [0, t_end] (N,), as one vmapped call of `jaxrb.sweep`:
+    (lift-off time (N,), unwrapped azimuth at the saves (N, SAVES), result codes (N,)). The
+    lift-off time is the first event that ends the two-point contact (inf if none before
+    t_end). A batch of fewer than MIN_BATCH is padded (the sweep repeats the last row), and
+    the inputs become plain float64 arrays (no weak types, e.g. from `jnp.full(n, 0.1)`),
+    so that the sweep, the tracked data and the predictions share one compiled program."""
+    rows = [np.asarray(x, np.float64) for x in (v0, drag, rolling, t_end)]
+    out = jaxrb.sweep(_one, rows, chunk_size=max(len(rows[0]), MIN_BATCH), progress=False)
+    return tuple(out)
 
-    def one(v0, drag, rolling, t_end):
-        traj = jaxrb.simulate(
-            scene_with(drag, rolling),
-            launch(v0),
-            jnp.linspace(0.0, t_end, SAVES),
-            rtol=RTOL,
-            atol=ATOL,
-            max_impacts=8,
-            throw=False,
-        )
-        log = traj.contact
-        left = (log.event_kind[:-1] == PAIR) & (log.event_kind[1:] != PAIR)
-        t_leave = jnp.where(jnp.any(left), log.event_time[1:][jnp.argmax(left)], jnp.inf)
-        return t_leave, unwrapped_azimuth(traj.states.pos), traj.result._value
 
-    return jax.vmap(one)(v0, drag, rolling, t_end)
+def _one(row):
+    v0, drag, rolling, t_end = row
+    traj = jaxrb.simulate(
+        scene_with(drag, rolling),
+        launch(v0),
+        jnp.linspace(0.0, t_end, SAVES),
+        rtol=RTOL,
+        atol=ATOL,
+        max_impacts=8,
+        throw=False,
+    )
+    log = traj.contact
+    left = (log.event_kind[:-1] == PAIR) & (log.event_kind[1:] != PAIR)
+    t_leave = jnp.where(jnp.any(left), log.event_time[1:][jnp.argmax(left)], jnp.inf)
+    return t_leave, unwrapped_azimuth(traj.states.pos), traj.result._value
 
 
 def leaving(v0, drag, rolling):

@@ -23,6 +23,8 @@ from pathlib import Path
 
 import jax
 
+from ._persistent import keep_programs
+
 CPU_FLAG = "--xla_cpu_use_fusion_emitters=false"
 
 
@@ -48,7 +50,11 @@ def _backend_started() -> bool:
 
 
 def speed_up_compilation(
-    cache: bool = True, cache_dir=None, nan_checks: bool = False, programs: bool = True
+    cache: bool = True,
+    cache_dir=None,
+    nan_checks: bool = False,
+    programs: bool = True,
+    program_sources=None,
 ) -> Path | None:
     """Turn on the persistent compilation cache (if `cache`) in `cache_dir` (default
     `default_cache_dir()`; a contact scene's program takes 0.5-2 MB there, and nothing is
@@ -74,7 +80,12 @@ def speed_up_compilation(
     the fits) in `cache_dir / "programs"`, so that a later process loads them instead of
     tracing (`persistent_jit`; a call whose scene holds a class defined outside jaxrb, e.g.
     your own force, is traced as usual). The key holds jaxrb's source, so an edit or
-    another version traces again.
+    another version traces again. `program_sources` (files or folders of your own code;
+    default: the environment variable `JAXRB_PROGRAM_SOURCES`, paths separated by
+    `os.pathsep`) lets the entry points keep programs that hold your own functions and
+    classes too (a force, a `sweep`'s function, a fit's residuals), keyed by the content
+    of those files: they must then depend only on code there, in jaxrb and in the packages
+    whose versions the key holds (`persistent_jit`).
     """
     if nan_checks and "EQX_ON_ERROR" not in os.environ:
         from ._solve import equinox_checks_mode, set_equinox_checks
@@ -85,17 +96,13 @@ def speed_up_compilation(
     if "xla_cpu_use_fusion_emitters" not in flags and not _backend_started():
         os.environ["XLA_FLAGS"] = f"{flags} {CPU_FLAG}".strip()
     if not cache:
-        from ._persistent import keep_programs
-
         keep_programs(False)
         return None
     directory = Path(cache_dir).expanduser() if cache_dir is not None else default_cache_dir()
     directory.mkdir(parents=True, exist_ok=True)
     jax.config.update("jax_compilation_cache_dir", str(directory))
     if programs:
-        from ._persistent import keep_programs
-
-        keep_programs(True, directory / "programs")
+        keep_programs(True, directory / "programs", program_sources)
     # programs quicker to compile than this are not worth a file
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
     return directory

@@ -13,12 +13,15 @@ leaf that is not an array, as `equinox.filter_jit` splits them), the shapes and 
 the array leaves, the versions of JAX, jaxlib, equinox, diffrax, optimistix and lineax, and
 the settings that change a trace (`jax_enable_x64`, the dtype promotion, how equinox's
 checks are traced now).
-Values `fn` closes over are keyed like static arguments. So the contract is: `fn` is a pure
+Values `fn` closes over are keyed like static arguments, and arrays it closes over (which
+the trace bakes in as constants) by their values. So the contract is: `fn` is a pure
 function of its arguments and of the code in those files; a global value it reads must not
 change between runs. Where the key cannot be made stable (a text naming a memory address, a
-function closing over an array, a class or function defined outside those files and
-packages), or the program cannot be exported (a host callback), or the process has several
-devices, the call is `equinox.filter_jit`'s, untouched.
+function closing over a traced value or an array of more than `MAX_KEYED_CONSTANT`
+elements, a class or function defined outside those files and packages), or the program
+cannot be exported (a host callback), or the process has several devices, the call is
+`equinox.filter_jit`'s, untouched. An edit to a file is seen at the next call, to a folder
+within `FOLDER_REFRESH_S`.
 """
 
 import copyreg
@@ -28,6 +31,7 @@ import importlib.metadata
 import os
 import pickle
 import sys
+import time
 import warnings
 from pathlib import Path
 
@@ -60,18 +64,42 @@ except ImportError:  # another equinox: output structures are then checked on lo
 def _source_digest(paths: tuple[str, ...]) -> str:
     """SHA-256 over the files at `paths` (files, or folders searched recursively: the
     sources and data files such as example scenes, not compiled Python or Markdown),
-    named relative to each path's parent; a file is read again when it changes on disk."""
+    named relative to each path's parent. A file is read again when it changes on disk; a
+    folder is searched again at most once a second (`FOLDER_REFRESH_S`), so a call costs
+    a few stat calls, not a walk of the package."""
     h = hashlib.sha256()
     for root in paths:
         root = Path(root)
-        files = sorted(root.rglob("*")) if root.is_dir() else [root]
-        for f in files:
-            if "__pycache__" in f.parts or f.suffix in (".pyc", ".md") or not f.is_file():
-                continue
-            stat = f.stat()
-            h.update(f.relative_to(root.parent).as_posix().encode())
-            h.update(_file_digest(str(f), stat.st_mtime_ns, stat.st_size).encode())
+        if root.is_dir():
+            h.update(_folder_digest(root).encode())
+        elif root.is_file():
+            h.update(root.name.encode())
+            h.update(_stat_digest(root).encode())
     return h.hexdigest()
+
+
+FOLDER_REFRESH_S = 1.0
+_FOLDERS: dict[Path, tuple[float, str]] = {}  # folder -> (when searched, digest)
+
+
+def _folder_digest(root: Path) -> str:
+    searched = _FOLDERS.get(root)
+    now = time.monotonic()
+    if searched is not None and now - searched[0] < FOLDER_REFRESH_S:
+        return searched[1]
+    h = hashlib.sha256()
+    for f in sorted(root.rglob("*")):
+        if "__pycache__" in f.parts or f.suffix in (".pyc", ".md") or not f.is_file():
+            continue
+        h.update(f.relative_to(root.parent).as_posix().encode())
+        h.update(_stat_digest(f).encode())
+    _FOLDERS[root] = (now, h.hexdigest())
+    return _FOLDERS[root][1]
+
+
+def _stat_digest(f: Path) -> str:
+    stat = f.stat()
+    return _file_digest(str(f), stat.st_mtime_ns, stat.st_size)
 
 
 @functools.cache
@@ -102,9 +130,13 @@ def _package_roots() -> tuple[str, ...]:
     return tuple(roots)
 
 
+MAX_KEYED_CONSTANT = 1 << 16  # larger arrays closed over are not hashed: traced as usual
+
+
 class _Describer:
     """Names the static part of a call as text, stable across processes, or finds that it
-    cannot (`None`): a memory address in the text, a function closing over an array, or a
+    cannot (`None`): a memory address in the text, a function closing over a traced value
+    or a large array, or a
     class or function defined outside the files the key covers (`roots`) and the packages
     whose versions it holds (an edit there would not change the key)."""
 
@@ -148,8 +180,17 @@ class _Describer:
         return ",".join(names)
 
     def leaf(self, x) -> str | None:
-        if eqx.is_array(x):
+        if isinstance(x, jax.core.Tracer):  # closed over inside a transformation
             return None
+        if eqx.is_array(x):  # a constant the function closes over: keyed by its value
+            if np.size(x) > MAX_KEYED_CONSTANT:
+                return None
+            x = np.asarray(x)
+            digest = hashlib.sha256(np.ascontiguousarray(x).tobytes()).hexdigest()
+            return f"array{x.shape}{x.dtype.str}:{digest}"
+        if isinstance(x, jax.tree_util.PyTreeDef):
+            types = self.node_types(x)
+            return None if types is None else f"treedef[{types}]{x!r}"
         if isinstance(x, functools.partial) or hasattr(x, "__code__"):
             return self.function(x)
         if not self.trusted_type(type(x)):
@@ -200,16 +241,26 @@ def _source_files(fn) -> tuple[str, ...]:
 
 
 # jaxrb's own compiled entry points keep their programs only when asked:
-# `speed_up_compilation(programs=True)` or the environment variable JAXRB_PROGRAMS=1
-_KEEP = {"on": os.environ.get("JAXRB_PROGRAMS", "") not in ("", "0"), "dir": None}
+# `speed_up_compilation(programs=True)` or the environment variable JAXRB_PROGRAMS=1; the
+# user's own code they may key on: `program_sources` there, or JAXRB_PROGRAM_SOURCES (paths
+# separated by os.pathsep)
+_KEEP = {
+    "on": os.environ.get("JAXRB_PROGRAMS", "") not in ("", "0"),
+    "dir": None,
+    "sources": tuple(p for p in os.environ.get("JAXRB_PROGRAM_SOURCES", "").split(os.pathsep) if p),
+}
 
 
-def keep_programs(on: bool, cache_dir=None) -> None:
+def keep_programs(on: bool, cache_dir=None, sources=None) -> None:
     """Whether jaxrb's own entry points (`simulate`, `simulate_throws`, `simulate_batch`,
-    the fits) keep their traced programs, and where (default `default_cache_dir() /
-    "programs"`)."""
+    `sweep`, the fits) keep their traced programs, and where (default `default_cache_dir()
+    / "programs"`). `sources` (files or folders; None leaves them as they are): your own
+    code, whose functions and classes (a force, a sweep's function, a fit's residuals) may
+    then be in a kept program's key, with the content of these files."""
     _KEEP["on"] = bool(on)
     _KEEP["dir"] = cache_dir
+    if sources is not None:
+        _KEEP["sources"] = tuple(str(Path(p).expanduser().resolve()) for p in sources)
 
 
 def entry_point(fn):
@@ -217,7 +268,9 @@ def entry_point(fn):
     `persistent_jit` does when `keep_programs` is on. A call that cannot be kept (a host
     callback such as a progress bar, a user-defined force class) is traced as usual,
     silently."""
-    kept = persistent_jit(fn, cache_dir=lambda: _KEEP["dir"], quiet=True)
+    kept = persistent_jit(
+        fn, cache_dir=lambda: _KEEP["dir"], sources=lambda: _KEEP["sources"], quiet=True
+    )
 
     @functools.wraps(fn)
     def call(*args, **kwargs):
@@ -233,8 +286,9 @@ def persistent_jit(fn=None, *, cache_dir=None, sources=(), quiet=False):
     `default_cache_dir() / "programs"`), so that a later process loads it instead of tracing
     `fn` again (module docstring: the key, and the contract that `fn` depends only on its
     arguments and on the source files the key covers: `jaxrb`'s own, `fn`'s file and
-    `sources`). Calls with traced arguments (inside another transformation) and arguments
-    whose static part has no stable key go through `equinox.filter_jit` untouched.
+    `sources`, a sequence or a function returning one). Calls with traced arguments (inside
+    another transformation) and arguments whose static part has no stable key go through
+    `equinox.filter_jit` untouched.
 
     Use it as `@persistent_jit` or `persistent_jit(fn, sources=("my_helpers/",))`. The
     directory can be deleted at any time; nothing in it is removed by itself.
@@ -277,6 +331,8 @@ def _key(fn, static, in_tree, leaves, sources) -> str | None:
     from ._solve import equinox_checks_mode
 
     paths = (str(Path(package_init).parent),) + _source_files(fn)
+    if callable(sources):
+        sources = sources()
     paths += tuple(str(Path(s).resolve()) for s in sources)
     describe = _Describer(paths)
     name = describe.function(fn)

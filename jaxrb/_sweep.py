@@ -8,6 +8,10 @@ a rerun with the same fingerprint loads finished chunks instead of recomputing t
 after an interruption), and a directory holding a different sweep is refused, never
 overwritten.
 
+Compiled once per process (per function and input structure); with `speed_up_compilation`
+(the command line calls it) the traced program is also kept on disk for the next process
+when `fn` is jaxrb's or comes from `program_sources` there (`persistent_jit`).
+
 Devices: `devices=jax.local_devices()` (or a `jax.sharding.Mesh` with one axis) shards each
 chunk along its leading axis with `NamedSharding(mesh, P(axis))` over one process's devices.
 
@@ -30,10 +34,11 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import equinox as eqx
 import jax
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+from ._persistent import entry_point
 
 _MANIFEST = "manifest.json"
 _FORMAT = 1
@@ -89,12 +94,18 @@ def _as_mesh(devices) -> Mesh | None:
     return Mesh(np.asarray(devices), ("batch",))
 
 
+@entry_point
+def _rows(fn, treedef, rows):
+    """`fn` on every row of `rows` (the leaves of the inputs, each with a leading axis)."""
+    return jax.vmap(lambda row: fn(jax.tree.unflatten(treedef, row)))(rows)
+
+
 @functools.lru_cache(maxsize=32)
 def _compiled(fn, treedef, mesh):
     """The jitted, vmapped (and sharded) function; cached so repeated sweeps reuse it."""
-    batched = jax.vmap(lambda row: fn(jax.tree.unflatten(treedef, row)))
     if mesh is None:
-        return eqx.filter_jit(batched)
+        return functools.partial(_rows, fn, treedef)
+    batched = jax.vmap(lambda row: fn(jax.tree.unflatten(treedef, row)))
     sharding = NamedSharding(mesh, PartitionSpec(mesh.axis_names[0]))
     return jax.jit(batched, in_shardings=sharding, out_shardings=sharding)
 

@@ -28,12 +28,17 @@ os.environ["JAXRB_CACHE_DIR"] = str(_CACHE)
 os.environ["JAX_COMPILATION_CACHE_DIR"] = str(_CACHE)
 os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0.5"
 # jaxrb's traced programs too (`jaxrb.persistent_jit`), in the same folder's `programs`: the
-# command line and the notebooks' kernels keep them through this variable
+# command line and the notebooks' kernels keep them through these variables, also where the
+# scene, the sweep's function or the fit's residuals come from the tests, the benchmarks or
+# the notebooks (their files are then in the key)
+_ROOT = Path(__file__).resolve().parent.parent
+_SOURCES = [str(_ROOT / name) for name in ("tests", "benchmarks", "notebooks")]
 os.environ["JAXRB_PROGRAMS"] = "1"
+os.environ["JAXRB_PROGRAM_SOURCES"] = os.pathsep.join(_SOURCES)
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "strict")
-jaxrb.speed_up_compilation(cache_dir=_CACHE)  # also the quicker CPU kernel emitters
+jaxrb.speed_up_compilation(cache_dir=_CACHE, program_sources=_SOURCES)  # + quicker CPU emitters
 
 
 @pytest.fixture(autouse=True, scope="module")

@@ -43,3 +43,10 @@ def persistent(fn=None, *, static_argnames=()):
         return program(*bound.args, **bound.kwargs)
 
     return call
+
+
+def traces(entry) -> int | None:
+    """Programs of a jaxrb entry point (`jaxrb._persistent.entry_point`) traced, or loaded
+    from the kept ones, in this process; None where equinox's private cache count is gone."""
+    size = getattr(entry.plain._cached, "_cache_size", None)
+    return None if size is None else size() + len(entry.kept)

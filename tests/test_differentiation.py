@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from programs import traces
 
 import jaxrb
 from jaxrb._simulate import _simulate_smooth
@@ -156,17 +157,12 @@ def test_vmap_over_scene_parameters():
         np.testing.assert_allclose(batched.omega[i], one.omega, rtol=1e-12)
 
 
-def _traces():
-    """Programs of the smooth path traced, or loaded from the kept ones, in this process."""
-    return _simulate_smooth.plain._cached._cache_size() + len(_simulate_smooth.kept)
-
-
 def test_jit_equals_eager_and_no_recompilation_on_new_values():
     ts = jnp.linspace(0.0, 1.0, 3)
     scene = jaxrb.Scene(jaxrb.RigidBody(1.0, jnp.array([1.0, 2.0, 3.0])), forces=(jaxrb.Gravity(),))
     jitted = jax.jit(lambda s, w: jaxrb.simulate(s, jaxrb.make_state(omega=w), ts))
     jaxrb.simulate(scene, jaxrb.make_state(omega=(0.1, 0.2, 0.3)), ts)
-    eager_traces = _traces()
+    eager_traces = traces(_simulate_smooth)
     for k in range(3):
         scene_k = eqx.tree_at(lambda s: s.body.mass, scene, jnp.array(1.0 + k))
         omega = jnp.array([0.1 * k, 0.2, 0.3])
@@ -176,4 +172,4 @@ def test_jit_equals_eager_and_no_recompilation_on_new_values():
         )
     assert jitted._cache_size() == 1
     # the eager path compiled once before the loop; only the jitted path's trace was added
-    assert _traces() <= eager_traces + 1
+    assert traces(_simulate_smooth) <= eager_traces + 1

@@ -14,6 +14,7 @@ import json
 
 import numpy as np
 import pytest
+from programs import traces
 
 import jaxrb
 import jaxrb.fit as jf
@@ -48,12 +49,6 @@ def tracked_ball():
     return pos, omega
 
 
-def _cache_size():
-    """Programs of the fit's solver traced or loaded in this process."""
-    size = getattr(_solve.plain._cached, "_cache_size", None)
-    return None if size is None else size() + len(_solve.kept)
-
-
 def test_contact_fit_from_tracked_trajectory(tracked_ball):
     """Restitution and friction from positions and gyro data, from starts 30 % off."""
     pos, omega = tracked_ball
@@ -76,7 +71,7 @@ def test_contact_fit_from_tracked_trajectory(tracked_ball):
 def test_cli_contact_round_trip(tmp_path, capsys):
     """`--write-example` writes the data and the scene; fitting them from the scene's guesses
     gives the true values back, with the solver compiled by the test above."""
-    before = _cache_size()
+    before = traces(_solve)
     data = tmp_path / "bounce.csv"
     assert main(["fit", "contact", "--write-example", str(data)]) == 0
     printed = capsys.readouterr().out
@@ -105,7 +100,7 @@ def test_cli_contact_round_trip(tmp_path, capsys):
     assert res["integrator"]["rtol"] == 1e-10 and res["num_steps"] < 100
     assert res["initial_position_gap"] == 0.0
     if before is not None:  # the solver compiled for the library fit was reused
-        assert _cache_size() == max(before, 1)
+        assert traces(_solve) == max(before, 1)
 
 
 def test_contact_fit_bad_input(tracked_ball):

@@ -12,6 +12,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from programs import traces
 
 import jaxrb
 import jaxrb.fit as jf
@@ -45,17 +46,11 @@ def _diagonal_starts(count, seed=0):
     return starts
 
 
-def _cache_size():
-    """Programs of the fit's solver traced or loaded in this process."""
-    size = getattr(_solve.plain._cached, "_cache_size", None)
-    return None if size is None else size() + len(_solve.kept)
-
-
 def test_random_diagonal_starts(omega_data):
     """20 starts, noise-free torque-free data: each fit converges to the truth (up to the
     scale it fixes) or says it did not; none raises. All 20 converge (measured: 10 to 40
     steps). Then noisy data from a start that used to exhaust the default budget."""
-    before = _cache_size()
+    before = traces(_solve)
     outcomes = []
     for guess in _diagonal_starts(20):
         with warnings.catch_warnings():
@@ -82,7 +77,7 @@ def test_random_diagonal_starts(omega_data):
         assert res.converged, (res.reason, res.num_steps)
         assert res.num_steps < 100
     if before is not None:  # one compiled solver for all 26 fits
-        assert _cache_size() - before <= 1
+        assert traces(_solve) - before <= 1
 
 
 def test_invalid_inertia_trial_gives_nan_not_an_abort(monkeypatch, omega_data):

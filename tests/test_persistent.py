@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 import jaxrb
+import jaxrb._persistent as persistent
 
 TRACES = []
 
@@ -107,15 +108,31 @@ def test_an_edited_source_file_traces_again(tmp_path):
     assert len(list(store.glob("*.bin"))) == 2
 
 
-def test_what_cannot_be_keyed_is_traced_as_usual(tmp_path):
-    data = jnp.arange(3.0)
-
-    def closes_over_an_array(x):
+def _scaled_by(data):
+    def scaled(x):
         return x * data
 
-    np.testing.assert_array_equal(
-        jaxrb.persistent_jit(closes_over_an_array, cache_dir=tmp_path)(jnp.ones(3)), data
-    )
+    return scaled
+
+
+def test_arrays_closed_over_are_keyed_by_their_values(tmp_path):
+    """Constants baked into the trace: a closure over other values is another program."""
+    ones = jnp.ones(3)
+    for data in (jnp.arange(3.0), jnp.arange(3.0) + 5.0, jnp.arange(3.0)):
+        out = jaxrb.persistent_jit(_scaled_by(data), cache_dir=tmp_path)(ones)
+        np.testing.assert_array_equal(out, data)
+    assert len(list(tmp_path.glob("*.bin"))) == 2
+
+
+def test_what_cannot_be_keyed_is_traced_as_usual(tmp_path):
+    # a closure over a traced value (inside a transformation), and over a large array
+    def loss(p):
+        return jnp.sum(jaxrb.persistent_jit(_scaled_by(p), cache_dir=tmp_path)(jnp.ones(3)))
+
+    np.testing.assert_array_equal(jax.grad(loss)(jnp.arange(3.0)), [1.0, 1.0, 1.0])
+    large = jnp.ones(persistent.MAX_KEYED_CONSTANT + 1)
+    out = jaxrb.persistent_jit(_scaled_by(large), cache_dir=tmp_path)(jnp.asarray(2.0))
+    assert float(out[0]) == 2.0
     # a function from outside the files the key covers, passed as a static argument
     namespace = {}
     exec("def outside(x):\n    return x * 3.0\n", namespace)  # noqa: S102
@@ -128,6 +145,23 @@ def test_what_cannot_be_keyed_is_traced_as_usual(tmp_path):
         [3.0, 3.0],
     )
     assert list(tmp_path.glob("*.bin")) == []
+
+
+def test_entry_points_keep_programs_of_the_users_sources_only_when_named(tmp_path):
+    """`jaxrb.sweep` of a function from a file of the user's: traced as usual, unless its
+    folder is among the program sources (then its content is in the key)."""
+    source, store = tmp_path / "src", tmp_path / "programs"
+    source.mkdir()
+    module = _load(source, "persistent_sweep_row", "def f(row):\n    return 2.0 * row\n")
+    before = dict(persistent._KEEP)
+    try:
+        for sources, kept in (([], 0), ([source], 1)):
+            persistent.keep_programs(True, store, sources=sources)
+            out = jaxrb.sweep(module.f, jnp.arange(3.0), progress=False)
+            np.testing.assert_array_equal(out, [0.0, 2.0, 4.0])
+            assert len(list(store.glob("*.bin"))) == kept
+    finally:
+        persistent._KEEP.update(before)
 
 
 def test_a_program_with_a_host_callback_is_traced_as_usual_with_a_warning(tmp_path):

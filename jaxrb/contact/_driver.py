@@ -146,13 +146,14 @@ def simulate_contact(
 
 class _Segment(eqx.Module):
     """The arguments of a segment's right-hand side, event function and step limit: the
-    scene, the segment's mode, the shifts of its conditions, and the step limit at its
-    start (s)."""
+    scene, the segment's mode, the shifts of its conditions, the step limit at its start
+    (s), and whether the body moves (False: a finished member of a batch, held still)."""
 
     scene: object
     mode: object
     offsets: jax.Array
     limit0: jax.Array
+    moving: jax.Array
 
 
 class ContactProgram(eqx.Module):
@@ -287,12 +288,22 @@ class ContactProgram(eqx.Module):
         offsets = start_offsets(conditions(start, mode, model, scene, tol), cond_tol)
         limit0 = step_limit_of(start, mode, offsets, model, tol)
         done = done | too_many | paradox
-        t0 = jnp.where(done, t_end, t0)
+        # a finished member (of a vmapped batch) is held still over a last sliver
+        # [t_end - idle, t_end], whose result is discarded: its saves, all at t_end, are
+        # then taken in its one step. Starting at t_end itself, diffrax would take them all
+        # again at every step of the members still running (its save loop restarts from a
+        # finished member's first save): a batch of three roulette balls with 481 saves
+        # ran 4x slower than with 3 saves, and 6x slower than a loop over the balls
+        idle = 64 * jnp.finfo(ts.dtype).eps * jnp.maximum(jnp.abs(t_end), 1.0)
+        t0 = jnp.where(done, t_end - idle, t0)
         with checks_without_host_callbacks():
             sol = dfx.diffeqsolve(
                 dfx.ODETerm(
                     traced_once(
-                        lambda t, y, args: mode_rates(t, y, args.mode, args.scene, model, tol)
+                        lambda t, y, args: jax.tree.map(
+                            lambda rate: jnp.where(args.moving, rate, 0.0),
+                            mode_rates(t, y, args.mode, args.scene, model, tol),
+                        )
                     )
                 ),
                 self.solver,
@@ -300,7 +311,7 @@ class ContactProgram(eqx.Module):
                 t1=t_end,
                 dt0=self.dt0,
                 y0=y,
-                args=_Segment(scene, mode, offsets, limit0),
+                args=_Segment(scene, mode, offsets, limit0, ~done),
                 saveat=dfx.SaveAt(
                     subs=[dfx.SubSaveAt(ts=jnp.clip(ts, t0, t_end)), dfx.SubSaveAt(t1=True)]
                 ),
