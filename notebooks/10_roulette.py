@@ -157,7 +157,7 @@ plt.show()
 # %% [markdown]
 # ## At full size
 #
-# 29 launch speeds in [1.2, 4] m/s and 32 prediction draws (550 s on a 2-core CPU), writing `roulette.md` (the table and the fit),
+# 29 launch speeds in [1.2, 4] m/s and 32 prediction draws (329 s on a 2-core CPU), writing `roulette.md` (the table and the fit),
 # `roulette.png` and `roulette.npz` to `bench_out/`:
 #
 # ```bash

@@ -29,10 +29,10 @@ os.environ["JAX_COMPILATION_CACHE_DIR"] = str(_CACHE)
 os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0.5"
 # jaxrb's traced programs too (`jaxrb.persistent_jit`), in the same folder's `programs`: the
 # command line and the notebooks' kernels keep them through these variables, also where the
-# scene, the sweep's function or the fit's residuals come from the tests, the benchmarks or
-# the notebooks (their files are then in the key)
+# scene, the sweep's function or the fit's residuals come from the tests or the benchmarks
+# (their files are then in the key; a function defined in a notebook's cell has no file)
 _ROOT = Path(__file__).resolve().parent.parent
-_SOURCES = [str(_ROOT / name) for name in ("tests", "benchmarks", "notebooks")]
+_SOURCES = [str(_ROOT / name) for name in ("tests", "benchmarks")]
 os.environ["JAXRB_PROGRAMS"] = "1"
 os.environ["JAXRB_PROGRAM_SOURCES"] = os.pathsep.join(_SOURCES)
 
