@@ -136,9 +136,9 @@ MAX_KEYED_CONSTANT = 1 << 16  # larger arrays closed over are not hashed: traced
 class _Describer:
     """Names the static part of a call as text, stable across processes, or finds that it
     cannot (`None`): a memory address in the text, a function closing over a traced value
-    or a large array, or a
-    class or function defined outside the files the key covers (`roots`) and the packages
-    whose versions it holds (an edit there would not change the key)."""
+    or a large array, or a class or function defined outside the files the key covers
+    (`roots`) and the packages whose versions it holds (an edit there would not change the
+    key)."""
 
     def __init__(self, roots):
         self.roots = tuple(str(Path(r).resolve()) for r in roots) + _package_roots()
@@ -185,9 +185,10 @@ class _Describer:
         if eqx.is_array(x):  # a constant the function closes over: keyed by its value
             if np.size(x) > MAX_KEYED_CONSTANT:
                 return None
+            weak = getattr(x, "weak_type", False)  # a weak constant promotes differently
             x = np.asarray(x)
             digest = hashlib.sha256(np.ascontiguousarray(x).tobytes()).hexdigest()
-            return f"array{x.shape}{x.dtype.str}:{digest}"
+            return f"array{x.shape}{x.dtype.str}{'weak' if weak else ''}:{digest}"
         if isinstance(x, jax.tree_util.PyTreeDef):
             types = self.node_types(x)
             return None if types is None else f"treedef[{types}]{x!r}"

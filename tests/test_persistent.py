@@ -124,6 +124,16 @@ def test_arrays_closed_over_are_keyed_by_their_values(tmp_path):
     assert len(list(tmp_path.glob("*.bin"))) == 2
 
 
+def test_a_weakly_typed_constant_is_another_program(tmp_path):
+    """x * c with x float32: a weak float64 c keeps float32, a strong one promotes."""
+    x = jnp.ones(2, jnp.float32)
+    with jax.numpy_dtype_promotion("standard"):
+        weak = jaxrb.persistent_jit(_scaled_by(jnp.asarray(2.0)), cache_dir=tmp_path)(x)
+        strong = jaxrb.persistent_jit(_scaled_by(jnp.float64(2.0)), cache_dir=tmp_path)(x)
+    assert weak.dtype == jnp.float32
+    assert strong.dtype == jnp.float64
+
+
 def test_what_cannot_be_keyed_is_traced_as_usual(tmp_path):
     # a closure over a traced value (inside a transformation), and over a large array
     def loss(p):
