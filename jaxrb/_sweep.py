@@ -94,10 +94,12 @@ def _as_mesh(devices) -> Mesh | None:
     return Mesh(np.asarray(devices), ("batch",))
 
 
-@entry_point
-def _rows(fn, treedef, rows):
+def _vmapped(fn, treedef, rows):
     """`fn` on every row of `rows` (the leaves of the inputs, each with a leading axis)."""
     return jax.vmap(lambda row: fn(jax.tree.unflatten(treedef, row)))(rows)
+
+
+_rows = entry_point(_vmapped)
 
 
 @functools.lru_cache(maxsize=32)
@@ -105,7 +107,7 @@ def _compiled(fn, treedef, mesh):
     """The jitted, vmapped (and sharded) function; cached so repeated sweeps reuse it."""
     if mesh is None:
         return functools.partial(_rows, fn, treedef)
-    batched = jax.vmap(lambda row: fn(jax.tree.unflatten(treedef, row)))
+    batched = functools.partial(_vmapped, fn, treedef)
     sharding = NamedSharding(mesh, PartitionSpec(mesh.axis_names[0]))
     return jax.jit(batched, in_shardings=sharding, out_shardings=sharding)
 
