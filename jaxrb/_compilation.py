@@ -57,8 +57,9 @@ def speed_up_compilation(
     program_sources=None,
 ) -> Path | None:
     """Turn on the persistent compilation cache (if `cache`) in `cache_dir` (default
-    `default_cache_dir()`; a contact scene's program takes 0.5-2 MB there, and nothing is
-    removed by itself: the directory can be deleted at any time), and, if JAX has not
+    `default_cache_dir()`; a contact scene's program takes 0.5-2 MB there, an eager
+    operation's a few kB, and nothing is removed by itself: the directory can be deleted at
+    any time), and, if JAX has not
     started its CPU backend yet and `XLA_FLAGS` does not choose otherwise, the quicker CPU
     kernel emitters. Changes process-wide settings: call it once at the start of a program.
     Returns the cache directory (None without a cache).
@@ -103,6 +104,8 @@ def speed_up_compilation(
     jax.config.update("jax_compilation_cache_dir", str(directory))
     if programs:
         keep_programs(True, directory / "programs", program_sources)
-    # programs quicker to compile than this are not worth a file
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    # every program, the smallest too: on a 2-core x86 CPU XLA compiles one of the small
+    # programs that eager operations (a scene's checks, the plots' arithmetic) make in
+    # 20-50 ms and reads it back in about 9 ms; a `jaxrb run` or a test makes hundreds
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     return directory

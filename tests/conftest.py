@@ -26,7 +26,7 @@ _CACHE = Path(
 )
 os.environ["JAXRB_CACHE_DIR"] = str(_CACHE)
 os.environ["JAX_COMPILATION_CACHE_DIR"] = str(_CACHE)
-os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0.5"
+os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"  # as speed_up_compilation
 # jaxrb's traced programs too (`jaxrb.persistent_jit`), in the same folder's `programs`: the
 # command line and the notebooks' kernels keep them through these variables, also where the
 # scene, the sweep's function or the fit's residuals come from the tests or the benchmarks
