@@ -59,10 +59,9 @@ def speed_up_compilation(
     """Turn on the persistent compilation cache (if `cache`) in `cache_dir` (default
     `default_cache_dir()`; a contact scene's program takes 0.5-2 MB there, an eager
     operation's a few kB, and nothing is removed by itself: the directory can be deleted at
-    any time), and, if JAX has not
-    started its CPU backend yet and `XLA_FLAGS` does not choose otherwise, the quicker CPU
-    kernel emitters. Changes process-wide settings: call it once at the start of a program.
-    Returns the cache directory (None without a cache).
+    any time), and, if JAX has not started its CPU backend yet and `XLA_FLAGS` does not
+    choose otherwise, the quicker CPU kernel emitters. Changes process-wide settings: call it
+    once at the start of a program. Returns the cache directory (None without a cache).
 
     `nan_checks=True` also makes equinox's run-time checks (`equinox.error_if`, used inside
     diffrax, optimistix and lineax) return NaN where they fail instead of raising through a
