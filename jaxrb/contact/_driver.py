@@ -406,9 +406,12 @@ def _event(model, tol):
     def condition(t, y, args, **kwargs):
         return smallest(t, y, args)
 
-    root_finder = TimeBisection(
-        rtol=tol.event, atol=tol.event, flip="detect", expand_if_necessary=True
-    )
+    # The event fires on a down-crossing only (direction=False): the condition is positive
+    # at the bracket's lower end and at most 0 at its upper end, so the bisection's
+    # orientation is known (flip=True: a negative value moves the upper end). Detecting
+    # it, or widening the bracket, would evaluate the condition at extra places: each is
+    # another copy of the mode solve in the compiled program.
+    root_finder = TimeBisection(rtol=tol.event, atol=tol.event, flip=True)
     return dfx.Event(condition, root_finder=root_finder, direction=False)
 
 

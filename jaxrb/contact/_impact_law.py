@@ -139,7 +139,9 @@ def _polish(W, c, target, present, mu, bilateral, lam, margin):
         size = jnp.max(jnp.abs(jnp.diagonal(G))) + tiny
         G = jnp.where(rows[:, None] & rows[None, :], G, jnp.eye(3 * S, dtype=dtype))
         G = G + 1e-13 * size * jnp.eye(3 * S, dtype=dtype)
-        z = z0 + A.T @ jnp.where(rows, small_solve(G, jnp.where(rows, rhs - A @ z0, 0.0)), 0.0)
+        z = z0 + A.T @ jnp.where(
+            rows, small_solve(G, jnp.where(rows, rhs - A @ z0, 0.0), unroll=True), 0.0
+        )
         return jnp.einsum("iab,ib->ia", B, jnp.where(unknown, z, 0.0).reshape(S, 3))
 
     hats0 = -lam[:, 1:] / jnp.where(lt > 0, lt, 1.0)[:, None]  # the slip after, as friction says
