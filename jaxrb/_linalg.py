@@ -26,12 +26,12 @@ def solve(A, b, unroll: bool = False):
     elimination with partial pivoting, then back substitution.
 
     The elimination is a loop over the n columns (one column's operations in the compiled
-    program instead of n: a die's contact program compiles in a third less time), or,
-    with `unroll`, written out column by column. The impact law unrolls: its normal
-    equations are nearly singular (a face's four corners give 12 rows of rank 6), and
-    only the unrolled elimination gave the same impulses for every numbering of the
-    corners to roundoff (through the loop they differed by up to 1e-5, relative, with
-    XLA's legacy CPU emitters)."""
+    program instead of n: a die's contact program compiled in 12.2 s instead of 14.4 s on
+    a 2-core x86 CPU), or, with `unroll`, written out column by column. The impact law
+    unrolls: its normal equations are nearly singular (a face's four corners give 12 rows
+    of rank 6), and only the unrolled elimination gave the same impulses for every
+    numbering of the corners to roundoff (through the loop they differed by up to 1e-5,
+    relative, with XLA's legacy CPU emitters)."""
     n = A.shape[-1]
     vector = b.ndim == 1
     B = b[:, None] if vector else b
