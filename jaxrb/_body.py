@@ -10,6 +10,13 @@ from ._shapes import AbstractShape
 from ._typing import Mat3
 
 
+@eqx.filter_jit
+def _shape_inertia(shape: AbstractShape, mass) -> Mat3:
+    """`shape`'s uniform-solid inertia (kg m^2) as one compiled program: made eagerly, its
+    dozen array operations would each compile (or load from the cache) on their own."""
+    return shape.inertia(mass)
+
+
 class RigidBody(eqx.Module):
     """Mass (kg) and inertia (kg m^2, about the mass centre, body axes) of a rigid body.
 
@@ -40,7 +47,7 @@ class RigidBody(eqx.Module):
         if inertia is None:
             if shape is None:
                 raise ValueError("RigidBody needs `inertia` or a `shape` to compute it from")
-            inertia = shape.inertia(self.mass)
+            inertia = _shape_inertia(shape, self.mass)
         inertia = jnp.asarray(inertia) if not hasattr(inertia, "dtype") else inertia
         if not jnp.issubdtype(inertia.dtype, jnp.floating):
             inertia = inertia.astype(float)

@@ -51,21 +51,34 @@ class Requirement(NamedTuple):
     ok: jax.Array
 
 
+def _namespace(x):
+    """(numpy, x as a numpy array) for concrete values, checked without compiling anything;
+    (jax.numpy, x) for traced ones."""
+    return (np, np.asarray(x)) if is_concrete(x) else (jnp, x)
+
+
 def finite(x) -> jax.Array:
-    return jnp.isfinite(x)
+    xp, x = _namespace(x)
+    return xp.isfinite(x)
 
 
 def finite_positive(x) -> jax.Array:
-    return jnp.isfinite(x) & (x > 0)
+    xp, x = _namespace(x)
+    return xp.isfinite(x) & (x > 0)
 
 
 def finite_nonnegative(x) -> jax.Array:
-    return jnp.isfinite(x) & (x >= 0)
+    xp, x = _namespace(x)
+    return xp.isfinite(x) & (x >= 0)
 
 
 def all_met(requirements) -> jax.Array:
-    """True when every requirement holds everywhere (traceable)."""
-    return jnp.all(jnp.array([jnp.all(r.ok) for r in requirements] or [True]))
+    """True when every requirement holds everywhere (traceable; concrete flags are combined
+    in numpy, without compiling anything)."""
+    oks = [r.ok for r in requirements]
+    if all(is_concrete(ok) for ok in oks):
+        return jnp.asarray(all(bool(np.all(np.asarray(ok))) for ok in oks))
+    return jnp.all(jnp.array([jnp.all(ok) for ok in oks] or [True]))
 
 
 def raise_unmet(owner: str, requirements) -> None:

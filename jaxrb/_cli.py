@@ -218,12 +218,12 @@ def _simulate(spec, progress=False, throw=True):
 
 def _metrics(traj, scene) -> dict:
     """Scalar summary metrics of one unbatched trajectory."""
-    import jaxrb
 
+    from ._host import energy as host_energy
     from .plotting import impact_summary as impact_records
 
     s = traj.states
-    energy = np.asarray(jaxrb.energy(scene, s), dtype=float)
+    energy = np.asarray(host_energy(scene, s), dtype=float)
     impacts = impact_records(traj, scene)
     lost_impacts = float(np.nansum(impacts["energy_lost"])) if impacts["times"].size else 0.0
     pos = np.asarray(s.pos, dtype=float)
@@ -319,6 +319,8 @@ def _check_title(spec) -> None:
             f"{spec.source}: title: {len(spec.title)} characters: a plot title has at most "
             f"{MAX_TITLE_CHARS} (put the rest in `description`, or use --no-plots)"
         )
+    if "$" not in spec.title:  # plain text: no mathtext to parse
+        return
     import io
 
     from matplotlib.figure import Figure

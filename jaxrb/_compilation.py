@@ -77,9 +77,10 @@ def speed_up_compilation(
 
     `programs=True` (with `cache`; `cache=False` turns it off) also keeps the traced
     programs of jaxrb's own entry points (`simulate`, `simulate_throws`, `simulate_batch`,
-    the fits) in `cache_dir / "programs"`, so that a later process loads them instead of
-    tracing (`persistent_jit`; a call whose scene holds a class defined outside jaxrb, e.g.
-    your own force, is traced as usual). The key holds jaxrb's source, so an edit or
+    the fits) in `cache_dir / "programs"`, with the executables compiled from them (about
+    as large again as JAX's copy), so that a later process loads them instead of tracing
+    and lowering (`persistent_jit`; a call whose scene holds a class defined outside jaxrb,
+    e.g. your own force, is traced as usual). The key holds jaxrb's source, so an edit or
     another version traces again. `program_sources` (files or folders of your own code;
     default: the environment variable `JAXRB_PROGRAM_SOURCES`, paths separated by
     `os.pathsep`) lets the entry points keep programs that hold your own functions and

@@ -42,7 +42,7 @@ def _power(traj, scene, forces) -> np.ndarray:
             total = total + jnp.sum(f * state.vel, axis=-1) + jnp.sum(m * state.omega, axis=-1)
         return total
 
-    return np.asarray(jax.vmap(power)(traj.ts, traj.states), dtype=float)
+    return np.asarray(jax.jit(jax.vmap(power))(traj.ts, traj.states), dtype=float)
 
 
 def cumulative_integral(t, p) -> np.ndarray:
@@ -72,9 +72,10 @@ def energy_budget(traj, scene) -> dict:
     potential (zeros if there are none); `nonpotential` (their class names); `drift`
     E(t) - E(0) - W(t) (J), or None for a scene with a floor.
     """
-    import jaxrb
 
-    energy = np.asarray(jaxrb.energy(scene, traj.states), dtype=float)
+    from ._host import energy as host_energy
+
+    energy = np.asarray(host_energy(scene, traj.states), dtype=float)
     forces = [f for f in scene.forces if not has_potential(f)]
     work = np.zeros_like(energy)
     if forces:

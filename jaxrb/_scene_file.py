@@ -412,15 +412,21 @@ def _body(root: _Table):
 
 
 def _euler_quat(angles_rad, sequence):
-    import jax.numpy as jnp
+    """`jaxrb.euler_to_quat` of the angles (rad) as one compiled program, in numpy."""
+    import jax
 
     import jaxrb
 
-    q = jnp.array([1.0, 0.0, 0.0, 0.0])
-    for axis_char, angle in zip(sequence, angles_rad, strict=True):
-        axis = jnp.zeros(3).at[int(axis_char) - 1].set(1.0)
-        q = jaxrb.quat_multiply(q, jaxrb.axis_angle_to_quat(axis, jnp.asarray(float(angle))))
-    return np.asarray(q)
+    return np.asarray(jax.jit(jaxrb.euler_to_quat, static_argnums=1)(angles_rad, sequence))
+
+
+def _axis_angle_quat(axis, angle_rad):
+    """`jaxrb.axis_angle_to_quat` as one compiled program, in numpy."""
+    import jax
+
+    import jaxrb
+
+    return np.asarray(jax.jit(jaxrb.axis_angle_to_quat)(axis, angle_rad))
 
 
 _SEQUENCES = ("121", "123", "131", "132", "212", "213", "231", "232", "312", "313", "321", "323")
@@ -449,7 +455,7 @@ def _initial(root: _Table):
         if axis is None:
             init.fail("axis", "must not be the zero vector")
         angle = math.radians(init.number("angle_deg"))
-        quat = np.asarray(jaxrb.axis_angle_to_quat(axis, angle))
+        quat = _axis_angle_quat(axis, angle)
     elif init.has("euler_deg"):
         angles = np.radians(init.vector("euler_deg"))
         quat = _euler_quat(angles, init.string("sequence", choices=_SEQUENCES))
@@ -471,10 +477,10 @@ def _initial(root: _Table):
 def _initial_energy(root: _Table, init: _Table | None, scene, state0):
     """Refuse an initial state whose energy (J) overflows, naming the part that does:
     1/2 m vel.vel (`vel`), 1/2 omega.J omega (`omega`), else the potential (`pos`)."""
-    import jaxrb
+    from ._host import energy as host_energy
 
     with np.errstate(all="ignore"):
-        total = float(jaxrb.energy(scene, state0))
+        total = float(host_energy(scene, state0))
         if math.isfinite(total):
             return
         mass = float(scene.body.mass)
@@ -500,11 +506,12 @@ def _above_floor(root: _Table, init: _Table | None, scene, state0):
     import jaxrb
     from jaxrb.contact import ContactOptions
 
+    from ._host import floor_gap
+
     if scene.floor is None:
         return
-    quat = jaxrb.quat_normalize(state0.quat)
     with np.errstate(all="ignore"):
-        gap = float(scene.floor.body_distance(scene.body.shape, state0.pos, quat))
+        gap = float(floor_gap(scene, state0))
     tolerance = ContactOptions().resolved(state0.pos.dtype).contact
     if not gap < -tolerance:
         return

@@ -132,23 +132,10 @@ class Bowl(AbstractCurvedSurface):
         return (n, *_tangents(n))
 
 
-class Cone(AbstractCurvedSurface):
-    """The inside of an upright cone with the world z axis as its axis, its apex at
-    (0, 0, `height`) and its surface rising outwards at `inclination` (rad, in (0, pi/2))
-    from the horizontal: z = height + tan(inclination) rho, rho the distance from the axis.
-    A roulette wheel's inclined ball track is such a cone.
-
-    The frame of a contact at azimuth phi: n = -sin(d) e_rho + cos(d) e_z (d the
-    inclination), t1 = cos(d) e_rho + sin(d) e_z (up the slope), t2 = e_phi. A ball rolling
-    without slipping and without spin about n on a horizontal circle of centre radius rho
-    goes round at Omega^2 = 5 g tan(d) / (7 rho) (docs/contact.md, section 8).
-
-    `tip_radius` (m, >= 0) rounds the apex: the bottom is then the spherical cap of that
-    radius tangent to the cone (a funnel). A ball of radius r < tip_radius rolls smoothly
-    through the bottom; at a sharp apex (the default, 0) a ball whose centre comes within
-    r sin(d) of the axis would touch the cone along a ring, which is not modelled (the
-    contact jumps from one side to the other: expect inconsistent events there).
-    """
+class AbstractConeTrack(AbstractCurvedSurface):
+    """The inside of an upright cone about the world z axis, its apex at (0, 0, `height`),
+    rising outwards at `inclination` (rad, in (0, pi/2)) from the horizontal, the apex
+    rounded by `tip_radius` (m): the geometry `Cone` is and `Wheel` bounds by a wall."""
 
     restitution: jnp.ndarray
     friction: jnp.ndarray
@@ -158,17 +145,8 @@ class Cone(AbstractCurvedSurface):
     height: jnp.ndarray
     tip_radius: jnp.ndarray
 
-    def __init__(
-        self,
-        restitution,
-        friction=0.0,
-        inclination=0.3,
-        height=0.0,
-        rolling_resistance=0.0,
-        spin_resistance=0.0,
-        tip_radius=0.0,
-    ):
-        set_contact_coefficients(self, restitution, friction, rolling_resistance, spin_resistance)
+    def _set_cone(self, inclination, height, tip_radius):
+        """Store the cone's dimensions as float arrays (called from `__init__`)."""
         self.inclination = jnp.asarray(inclination, dtype=float)
         self.height = jnp.asarray(height, dtype=float)
         self.tip_radius = jnp.asarray(tip_radius, dtype=float)
@@ -202,7 +180,8 @@ class Cone(AbstractCurvedSurface):
             return u, jnp.broadcast_to(side > 0, u.shape[:-1])
         return u, -u[..., 2] >= _safe_norm(u, axis=-1) * jnp.cos(d)
 
-    def gap(self, points, side=None):
+    def track_gap(self, points, side=None):
+        """Signed distance (m) of world `points` (..., 3) above the track."""
         d = self.inclination.astype(points.dtype)
         _, rho = self._radial(points)
         cone = (points[..., 2] - self.height.astype(points.dtype)) * jnp.cos(d) - rho * jnp.sin(d)
@@ -218,7 +197,8 @@ class Cone(AbstractCurvedSurface):
         d = self.inclination.astype(centre.dtype)
         return -u[2] / jnp.maximum(_safe_norm(u), jnp.finfo(centre.dtype).tiny) - jnp.cos(d)
 
-    def frame_at(self, centre, side=None):
+    def track_frame(self, centre, side=None):
+        """The frame (n, t1, t2, world) of a ball centred at `centre` on the track."""
         d = self.inclination.astype(centre.dtype)
         e_rho, _ = self._radial(centre)
         e_z = jnp.array([0.0, 0.0, 1.0], centre.dtype)
@@ -228,7 +208,45 @@ class Cone(AbstractCurvedSurface):
         return n, jnp.cross(e_phi, n), e_phi
 
 
-class Wheel(AbstractCurvedSurface):
+class Cone(AbstractConeTrack):
+    """The inside of an upright cone with the world z axis as its axis, its apex at
+    (0, 0, `height`) and its surface rising outwards at `inclination` (rad, in (0, pi/2))
+    from the horizontal: z = height + tan(inclination) rho, rho the distance from the axis.
+    A roulette wheel's inclined ball track is such a cone.
+
+    The frame of a contact at azimuth phi: n = -sin(d) e_rho + cos(d) e_z (d the
+    inclination), t1 = cos(d) e_rho + sin(d) e_z (up the slope), t2 = e_phi. A ball rolling
+    without slipping and without spin about n on a horizontal circle of centre radius rho
+    goes round at Omega^2 = 5 g tan(d) / (7 rho) (docs/contact.md, section 8).
+
+    `tip_radius` (m, >= 0) rounds the apex: the bottom is then the spherical cap of that
+    radius tangent to the cone (a funnel). A ball of radius r < tip_radius rolls smoothly
+    through the bottom; at a sharp apex (the default, 0) a ball whose centre comes within
+    r sin(d) of the axis would touch the cone along a ring, which is not modelled (the
+    contact jumps from one side to the other: expect inconsistent events there).
+    """
+
+    def __init__(
+        self,
+        restitution,
+        friction=0.0,
+        inclination=0.3,
+        height=0.0,
+        rolling_resistance=0.0,
+        spin_resistance=0.0,
+        tip_radius=0.0,
+    ):
+        set_contact_coefficients(self, restitution, friction, rolling_resistance, spin_resistance)
+        self._set_cone(inclination, height, tip_radius)
+
+    def gap(self, points, side=None):
+        return self.track_gap(points, side)
+
+    def frame_at(self, centre, side=None):
+        return self.track_frame(centre, side)
+
+
+class Wheel(AbstractConeTrack):
     """A roulette wheel's stator, for a ball: the inclined track, the inside of an upright
     cone about the world z axis (as `Cone`: apex at (0, 0, `height`), rising outwards at
     `inclination`, rad, apex rounded by `tip_radius`), bounded by the outer wall, the inside
@@ -250,13 +268,6 @@ class Wheel(AbstractCurvedSurface):
     falls to v^2 = (5/7) g rho tan(inclination) (docs/contact.md, section 11).
     """
 
-    restitution: jnp.ndarray
-    friction: jnp.ndarray
-    rolling_resistance: jnp.ndarray
-    spin_resistance: jnp.ndarray
-    inclination: jnp.ndarray
-    height: jnp.ndarray
-    tip_radius: jnp.ndarray
     wall_radius: jnp.ndarray
 
     parts = 2
@@ -273,30 +284,16 @@ class Wheel(AbstractCurvedSurface):
         tip_radius=0.0,
     ):
         set_contact_coefficients(self, restitution, friction, rolling_resistance, spin_resistance)
-        self.inclination = jnp.asarray(inclination, dtype=float)
-        self.height = jnp.asarray(height, dtype=float)
-        self.tip_radius = jnp.asarray(tip_radius, dtype=float)
+        self._set_cone(inclination, height, tip_radius)
         self.wall_radius = jnp.asarray(wall_radius, dtype=float)
 
     def requirements(self):
         R = self.wall_radius
         return (
-            *self.track().requirements(),
+            *super().requirements(),
             Requirement(
                 "wall_radius", R, "finite and > tip_radius", finite(R) & (R > self.tip_radius)
             ),
-        )
-
-    def track(self) -> Cone:
-        """The track alone, as a `Cone`."""
-        return Cone(
-            self.restitution,
-            self.friction,
-            self.inclination,
-            self.height,
-            self.rolling_resistance,
-            self.spin_resistance,
-            self.tip_radius,
         )
 
     def part_gaps(self, points, side=None):
@@ -304,24 +301,21 @@ class Wheel(AbstractCurvedSurface):
         the wall."""
         rho = _safe_norm(points[..., :2], axis=-1)
         wall = self.wall_radius.astype(points.dtype) - rho
-        return jnp.stack([self.track().gap(points, side), wall], axis=-1)
+        return jnp.stack([self.track_gap(points, side), wall], axis=-1)
 
     def gap(self, points, side=None):
         """Signed distance (m) of world `points` above the nearer part (the smaller gap)."""
         return jnp.min(self.part_gaps(points, side), axis=-1)
 
-    def region(self, centre):
-        return self.track().region(centre)
-
     def frame_at(self, centre, side=None):
         """The track's frame (the wall's: `part_frames`)."""
-        return self.track().frame_at(centre, side)
+        return self.track_frame(centre, side)
 
     def part_frames(self, centre, side=None):
         """Normals n, tangents t1, t2 (each (2, 3), world) of a ball centred at `centre` on the
         track (row 0) and on the wall (row 1)."""
-        n, t1, t2 = self.track().frame_at(centre, side)
-        e_rho, _ = self.track()._radial(centre)
+        n, t1, t2 = self.track_frame(centre, side)
+        e_rho, _ = self._radial(centre)
         e_z = jnp.array([0.0, 0.0, 1.0], centre.dtype)
         e_phi = jnp.cross(e_z, e_rho)
         return jnp.stack([n, -e_rho]), jnp.stack([t1, e_z]), jnp.stack([t2, e_phi])

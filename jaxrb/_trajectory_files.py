@@ -62,8 +62,8 @@ def bytes_per_save(scene) -> int:
 
 def file_arrays(traj, scene) -> dict:
     """The arrays of `trajectory.npz` (numpy, one leading index per save time)."""
-    import jaxrb
 
+    from ._host import energy as host_energy
     from ._reaction import reaction_arrays
     from .plotting import impact_summary
 
@@ -74,7 +74,7 @@ def file_arrays(traj, scene) -> dict:
         "quat": np.asarray(s.quat, float),
         "vel": np.asarray(s.vel, float),
         "omega": np.asarray(s.omega, float),
-        "energy": np.asarray(jaxrb.energy(scene, s), float),
+        "energy": np.asarray(host_energy(scene, s), float),
     }
     if scene.joint is not None:
         arrays |= reaction_arrays(traj, scene)

@@ -11,7 +11,6 @@ Every function broadcasts over leading batch axes (a mass of shape (...) with a 
 
 from typing import NamedTuple
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -251,23 +250,24 @@ class InertiaViolations(NamedTuple):
     non_finite: Array
 
 
-def _analyse(J: Array, rtol: float, eigenvalues=symmetric_eigenvalues3):
-    """Flags plus the numbers the error messages quote."""
-    non_finite = ~jnp.all(jnp.isfinite(J), axis=(-2, -1))
-    eye = jnp.eye(3, dtype=J.dtype)
-    Jf = jnp.where(non_finite[..., None, None], eye, J)
-    JT = jnp.swapaxes(Jf, -1, -2)
-    scale = jnp.max(jnp.abs(Jf), axis=(-2, -1))
-    asym = jnp.max(jnp.abs(Jf - JT), axis=(-2, -1))
+def _analyse(J: Array, rtol: float, eigenvalues=symmetric_eigenvalues3, xp=jnp):
+    """Flags plus the numbers the error messages quote; `xp` is `jax.numpy` (traceable) or
+    `numpy` (a concrete tensor's check: no compiled programs)."""
+    non_finite = ~xp.all(xp.isfinite(J), axis=(-2, -1))
+    eye = xp.eye(3, dtype=J.dtype)
+    Jf = xp.where(non_finite[..., None, None], eye, J)
+    JT = xp.swapaxes(Jf, -1, -2)
+    scale = xp.max(xp.abs(Jf), axis=(-2, -1))
+    asym = xp.max(xp.abs(Jf - JT), axis=(-2, -1))
     not_symmetric = asym > rtol * scale
     # the conditions are scale invariant: analyse J / max |J| (divided in two halves, whose
     # reciprocals stay normal numbers), so that no product overflows for huge or tiny tensors
-    half = jnp.sqrt(jnp.where(scale > 0, scale, 1.0))[..., None, None]
+    half = xp.sqrt(xp.where(scale > 0, scale, 1.0))[..., None, None]
     unit = eigenvalues(0.5 * (Jf / half / half + JT / half / half))
-    trace = jnp.sum(unit, axis=-1)
+    trace = xp.sum(unit, axis=-1)
     i1, i2, i3 = unit[..., 0], unit[..., 1], unit[..., 2]
-    not_pd = i1 <= rtol * jnp.abs(trace)
-    triangle = i1 + i2 < i3 - rtol * jnp.abs(trace)
+    not_pd = i1 <= rtol * xp.abs(trace)
+    triangle = i1 + i2 < i3 - rtol * xp.abs(trace)
     moments = unit * half[..., 0] * half[..., 0]
     flags = InertiaViolations(
         not_symmetric=not_symmetric & ~non_finite,
@@ -327,7 +327,10 @@ def check_inertia(J: ArrayLike, name: str = "inertia", rtol: float = 1e-9) -> Ma
     J = as_float_array(J, name, (3, 3))
     if not is_concrete(J):
         return J
-    flags, asym, scale, moments = jax.tree.map(np.asarray, _analyse(J, rtol, np.linalg.eigvalsh))
+    # in float64 whatever J's precision: a tensor on the triangle inequality's boundary (a flat
+    # plate, I1 + I2 = I3 in its float32 numbers) is not refused for float32 roundoff
+    J64 = np.asarray(J, dtype=np.float64)
+    flags, asym, scale, moments = _analyse(J64, rtol, np.linalg.eigvalsh, xp=np)
 
     def where(flag) -> tuple[tuple[int, ...], str]:
         idx = tuple(int(i) for i in np.argwhere(flag)[0]) if flag.ndim else ()

@@ -77,7 +77,7 @@ def impact_summary(traj, scene) -> dict:
     Returns a dict with numpy arrays `times` and `energy_lost` (empty when the scene has no
     floor or nothing hit it).
     """
-    import jaxrb
+    from . import _host
 
     empty = {"times": np.zeros(0), "energy_lost": np.zeros(0)}
     imp = getattr(traj, "impacts", None)
@@ -86,15 +86,16 @@ def impact_summary(traj, scene) -> dict:
     times = getattr(imp, "times", getattr(imp, "time", None))
     if times is None:
         return empty
-    times = _np(times).reshape(-1)
-    valid = getattr(imp, "valid", None)
-    valid = (
-        np.isfinite(times) if valid is None else (_np(valid).reshape(-1) > 0) & np.isfinite(times)
-    )
+    times = _np(times)
+    valid = np.isfinite(times)
+    count = getattr(imp, "count", None)  # an ImpactRecord's first `count` slots are used
+    if count is not None:
+        valid &= np.arange(times.shape[-1]) < _np(count)[..., None]
+    times, valid = times.reshape(-1), valid.reshape(-1)
     lost = getattr(imp, "energy_lost", None)
     if lost is None and hasattr(imp, "state_before") and hasattr(imp, "state_after"):
-        lost = _np(jaxrb.energy(scene, imp.state_before)) - _np(
-            jaxrb.energy(scene, imp.state_after)
+        lost = _np(_host.energy(scene, imp.state_before)) - _np(
+            _host.energy(scene, imp.state_after)
         )
     lost = np.full_like(times, np.nan) if lost is None else _np(lost).reshape(-1)
     return {"times": times[valid], "energy_lost": lost[valid]}
@@ -108,9 +109,7 @@ def trajectory_arrays(traj, scene) -> dict:
     `kinetic_translation`, `kinetic_rotation`, `potential` (J); `lowest_z` (m, world z of the
     lowest point of the shape, or of the mass centre without a shape).
     """
-    import jax.numpy as jnp
-
-    import jaxrb
+    from . import _host
 
     s = traj.states
     body = scene.body
@@ -120,15 +119,11 @@ def trajectory_arrays(traj, scene) -> dict:
     pos = _np(s.pos)
     mass = float(body.mass)
     J = _np(body.inertia_matrix)
-    energy = _np(jaxrb.energy(scene, s))
+    energy = _np(_host.energy(scene, s))
     kin_t = 0.5 * mass * np.sum(vel**2, axis=-1)
     kin_r = 0.5 * np.einsum("ti,ij,tj->t", omega, J, omega)
-    omega_world = _np(jaxrb.quat_rotate(jnp.asarray(quat), jnp.asarray(omega)))
-    if body.shape is not None:
-        low = body.shape.lowest_point(jnp.asarray(quat))
-        lowest_z = pos[:, 2] + _np(jaxrb.quat_rotate(jnp.asarray(quat), low))[:, 2]
-    else:
-        lowest_z = pos[:, 2].copy()
+    omega_world = _np(_host.omega_world(s))
+    lowest_z = _np(_host.lowest_z(body.shape, s)) if body.shape is not None else pos[:, 2].copy()
     return {
         "t": _np(traj.ts),
         "pos": pos,
@@ -161,8 +156,10 @@ def _legend(ax, ncol=1):
 
 
 def _mark_impacts(ax, times):
-    for i, t in enumerate(times):
-        ax.axvline(t, color="0.6", lw=0.8, ls=":", label="impact" if i == 0 else None)
+    """A dotted vertical line across `ax` at each impact time (s): one artist for all."""
+    if len(times):
+        transform = ax.get_xaxis_transform()  # x in data, y from 0 to 1 of the axes
+        ax.vlines(times, 0, 1, transform=transform, colors="0.6", lw=0.8, ls=":", label="impact")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -186,7 +183,7 @@ def plot_height_attitude(traj, scene, path=None, title=None):
     if scene.body.shape is not None:
         ax1.plot(a["t"], a["lowest_z"], label="lowest point z", lw=1)
     level = scene.floor is not None and not scene.floor.curved
-    if level and float(scene.floor.normal[2]) == 1.0:  # a level floor
+    if level and float(np.asarray(scene.floor.normal)[2]) == 1.0:  # a level floor
         ax1.axhline(float(scene.floor.height), color="k", lw=1, label="floor")
     ax1.set_ylabel("height z (m)")
     for k in range(4):

@@ -3,7 +3,9 @@ instead of tracing again; anything that could make a kept program stale changes 
 keeps it off the disk."""
 
 import importlib.util
+import pickle
 import sys
+import time
 
 import equinox as eqx
 import jax
@@ -25,6 +27,14 @@ def _model(x, y, power):
 class _Wrapped(eqx.Module):
     a: jax.Array
     label: str = eqx.field(static=True)
+
+
+def _model_plus(offset):
+    def model(x, y, power):
+        TRACES.append(power)
+        return {"sum": jnp.sum(x**power) + y + offset, "scaled": x * y}
+
+    return model
 
 
 def _with_module(m):
@@ -66,6 +76,70 @@ def test_a_kept_program_is_loaded_without_tracing_and_gives_the_same_result(tmp_
     g = jax.grad(lambda x: second(x, y, 3)["sum"])(x)
     np.testing.assert_allclose(g, 3 * x**2)
     assert len(list(tmp_path.glob("*.bin"))) == 3
+
+
+def test_the_compiled_executable_is_kept_and_loaded_first(tmp_path):
+    """Beside the exported program, the executable XLA compiled for this machine: a new
+    caller loads it (no trace, no lowering); a damaged one is removed. (The program adds a
+    number new on each run, so that JAX's own cache cannot serve it.)"""
+    x, y = jnp.arange(3.0), jnp.asarray(2.0)
+    model = _model_plus(float(time.time_ns() % 10**12))
+    TRACES.clear()
+    out = jaxrb.persistent_jit(model, cache_dir=tmp_path)(x, y, 3)
+    (program,) = tmp_path.glob("*.bin")
+    (executable,) = tmp_path.glob("*.exe")
+    assert executable.name.startswith(program.stem + ".")
+    program.unlink()  # the executable alone serves a new caller
+    again = jaxrb.persistent_jit(model, cache_dir=tmp_path)(x, y, 3)
+    assert TRACES == [3]
+    np.testing.assert_array_equal(again["sum"], out["sum"])
+    np.testing.assert_array_equal(again["scaled"], out["scaled"])
+    executable.write_bytes(b"damaged")  # and nothing else: removed, traced again
+    third = jaxrb.persistent_jit(model, cache_dir=tmp_path)(x, y, 3)
+    assert TRACES == [3, 3]
+    np.testing.assert_array_equal(third["sum"], out["sum"])
+    assert not executable.exists()  # (JAX's cache served the compile: see below)
+    assert program.exists()
+
+
+def test_an_executable_that_loads_but_does_not_run_is_removed(tmp_path, monkeypatch):
+    """An executable whose code is missing fails at its first run, not on loading: the call
+    then removes its file and traces as usual, with the right result."""
+    x, y = jnp.arange(3.0), jnp.asarray(2.0)
+    out = jaxrb.persistent_jit(_model, cache_dir=tmp_path)(x, y, 6)
+    (program,) = tmp_path.glob("*.bin")
+    executable = program.with_suffix(f".{persistent._machine_key()}.exe")
+    executable.write_bytes(b"loads, then fails")
+
+    def missing_code(*leaves):
+        raise jax.errors.JaxRuntimeError("NOT_FOUND: Function fusion not found (type id: 1)")
+
+    def load(path, avals):
+        _, out_tree = pickle.loads(program.read_bytes())
+        return missing_code, out_tree
+
+    monkeypatch.setattr(persistent, "_load_executable", load)
+    TRACES.clear()
+    again = jaxrb.persistent_jit(_model, cache_dir=tmp_path)(x, y, 6)
+    assert TRACES == [6]
+    assert not executable.exists()
+    np.testing.assert_array_equal(again["sum"], out["sum"])
+    np.testing.assert_array_equal(again["scaled"], out["scaled"])
+
+
+def test_an_executable_read_from_jax_cache_is_not_kept(tmp_path):
+    """Read back from JAX's persistent cache, an executable serialises without its code
+    (run, its copy fails with "Function ... not found"): only the exported program is kept
+    then, and JAX's cache serves the next caller."""
+    x, y = jnp.arange(3.0), jnp.asarray(2.0)
+    first, second = tmp_path / "first", tmp_path / "second"
+    jaxrb.persistent_jit(_model, cache_dir=first)(x, y, 4)  # now in JAX's cache
+    out = jaxrb.persistent_jit(_model, cache_dir=second)(x, y, 4)
+    assert len(list(second.glob("*.bin"))) == 1
+    assert list(second.glob("*.exe")) == []
+    again = jaxrb.persistent_jit(_model, cache_dir=second)(x, y, 4)
+    np.testing.assert_array_equal(again["sum"], out["sum"])
+    assert float(out["sum"]) == 0.0 + 1.0 + 16.0 + 2.0
 
 
 def test_modules_keep_their_static_fields_in_the_key(tmp_path):

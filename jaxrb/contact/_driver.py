@@ -31,7 +31,7 @@ from ._events import (
     conditions,
     start_offsets,
 )
-from ._features import contact_model
+from ._features import contact_model, contact_model_class
 from ._modes import FLIGHT, PAIR, flight_mode, mode_rates, solve_mode, unit_state
 from ._options import ContactOptions
 from ._record import ContactLog, add_impact, empty_impacts
@@ -63,7 +63,7 @@ def check_contact_scene(scene, options) -> None:
             f"a {type(scene.floor).__name__} meets only a Sphere (the body is a "
             f"{type(scene.body.shape).__name__}); any shape meets a Floor"
         )
-    contact_model(scene.body.shape, scene.floor.parts)  # raises for a shape with none
+    contact_model_class(scene.body.shape, scene.floor.parts)  # raises for a shape with none
     resists = [scene.floor.rolling_resistance, scene.floor.spin_resistance]
     if not isinstance(scene.body.shape, Sphere) and any(
         is_concrete(x) and float(x) != 0.0 for x in resists

@@ -363,9 +363,10 @@ CONTACT_MODELS = {
 """The contact model of each shape class (`contact_model` looks a shape up here)."""
 
 
-def contact_model(shape: AbstractShape, parts: int = 1) -> AbstractContactModel:
-    """The contact model of `shape` from the table, against a surface of `parts` parts (only
-    a ball meets a surface of several); an unknown shape is an error."""
+def contact_model_class(shape: AbstractShape, parts: int = 1) -> type[AbstractContactModel]:
+    """The class of `shape`'s contact model in the table, against a surface of `parts` parts
+    (only a ball meets a surface of several); raises a TypeError for a shape with none. Builds
+    nothing (a scene's checks call it; building a model computes its geometry)."""
     try:
         build = CONTACT_MODELS[type(shape)]
     except KeyError:
@@ -374,8 +375,15 @@ def contact_model(shape: AbstractShape, parts: int = 1) -> AbstractContactModel:
             f"no contact model for shape {type(shape).__name__} (floor contact is modelled "
             f"for {known})"
         ) from None
+    if parts != 1 and build is not SphereContact:
+        raise TypeError(f"a surface of {parts} parts meets only a Sphere")
+    return build
+
+
+def contact_model(shape: AbstractShape, parts: int = 1) -> AbstractContactModel:
+    """The contact model of `shape` from the table, against a surface of `parts` parts (only
+    a ball meets a surface of several); an unknown shape is an error."""
+    build = contact_model_class(shape, parts)
     if parts != 1:
-        if build is not SphereContact:
-            raise TypeError(f"a surface of {parts} parts meets only a Sphere")
-        return SphereContact(shape, parts)
+        return build(shape, parts)
     return build(shape)
