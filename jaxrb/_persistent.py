@@ -13,8 +13,11 @@ that first: no lowering, no lookup in JAX's cache (a die's contact program: 0.9 
 1.4 s on a 2-core x86 CPU). Only an executable XLA compiled in this process is kept: read
 back from JAX's persistent cache, an executable serialises without its code (loaded again,
 it fails with "Function ... not found"), and that program is then served by JAX's cache as
-before. An executable that does not load, or loads and fails at its first run, is removed
-and the call traced as usual.
+before. Nor is one whose program calls a custom kernel (a `stablehlo.custom_call`, e.g.
+LAPACK's SVD or LU on a CPU): jaxlib sets those kernels up when it lowers such a call, so a
+new process that only loaded the executable would call an unset kernel (a segmentation
+fault, as in JAX issue 28908). An executable that does not load, or loads and fails at its
+first run, is removed and the call traced as usual.
 
 The key is a SHA-256 of: the source of the `jaxrb` package, the file that defines `fn`, the
 files and folders named in `sources`, `fn`'s name, the static part of the arguments (every
@@ -414,7 +417,10 @@ def _load_or_export(key, fn, static, in_tree, leaves, cache_dir, quiet):
         exported, out_tree, blob = made
         _write(path, blob)
     compiled, fresh = _compile(exported, avals)
-    if fresh:  # read back from JAX's cache, an executable does not serialise whole
+    # read back from JAX's cache, an executable does not serialise whole; one that calls a
+    # custom kernel (LAPACK's, on a CPU) runs only where the kernel was set up, which jaxlib
+    # does when it lowers such a call: loaded by itself in a new process, it would crash
+    if fresh and b"custom_call" not in exported.mlir_module_serialized:
         _keep_executable(executable, compiled, out_tree)
     return compiled, out_tree, None
 

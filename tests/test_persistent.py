@@ -102,6 +102,21 @@ def test_the_compiled_executable_is_kept_and_loaded_first(tmp_path):
     assert program.exists()
 
 
+def test_a_program_with_a_custom_kernel_keeps_no_executable(tmp_path):
+    """LAPACK's kernels are set up when a call to one is lowered: an executable that calls
+    one, loaded by itself in a new process, would crash. Only the exported program is kept."""
+    offset = (time.time_ns() % 10**6) * 1e-12  # new on each run: compiled here, not read back
+
+    def inverse(m):
+        return jnp.linalg.inv(m) + offset
+
+    m = jnp.array([[2.0, 1.0], [1.0, 3.0]])
+    out = jaxrb.persistent_jit(inverse, cache_dir=tmp_path)(m)
+    np.testing.assert_allclose(out - offset, np.linalg.inv(np.asarray(m)), rtol=1e-12)
+    assert len(list(tmp_path.glob("*.bin"))) == 1
+    assert list(tmp_path.glob("*.exe")) == []
+
+
 def test_an_executable_that_loads_but_does_not_run_is_removed(tmp_path, monkeypatch):
     """An executable whose code is missing fails at its first run, not on loading: the call
     then removes its file and traces as usual, with the right result."""
