@@ -54,6 +54,7 @@ import numpy as np
 from jax import export
 
 _PACKAGES = ("jax", "jaxlib", "equinox", "diffrax", "optimistix", "lineax")
+_RUNTIME_ERROR = getattr(jax.errors, "JaxRuntimeError", RuntimeError)  # XLA's, at run time
 
 
 def _missing_reduce(_):
@@ -330,7 +331,7 @@ def persistent_jit(fn=None, *, cache_dir=None, sources=(), quiet=False):
             return jax.tree.unflatten(out_tree, run(*leaves))
         try:  # the first run of an executable read from its file
             out = run(*leaves)
-        except jax.errors.JaxRuntimeError:  # it loads but does not run: removed, traced again
+        except _RUNTIME_ERROR:  # it loads but does not run: removed, traced again
             unproven.unlink(missing_ok=True)
             del loaded[key]
             return jitted(*args, **kwargs)
@@ -428,17 +429,20 @@ def _load_or_export(key, fn, static, in_tree, leaves, cache_dir, quiet):
 def _compile(exported, avals):
     """(the compiled program, whether XLA compiled it here rather than JAX reading it from
     its persistent cache)."""
+    monitoring = jax.monitoring
+    if not hasattr(monitoring, "unregister_event_listener"):  # an older JAX: cannot tell
+        return jax.jit(exported.call).lower(*avals).compile(), False
     hits = []
 
     def count(event, **kwargs):
         if event == "/jax/compilation_cache/cache_hits":
             hits.append(event)
 
-    jax.monitoring.register_event_listener(count)
+    monitoring.register_event_listener(count)
     try:
         compiled = jax.jit(exported.call).lower(*avals).compile()
     finally:
-        jax.monitoring.unregister_event_listener(count)
+        monitoring.unregister_event_listener(count)
     return compiled, not hits
 
 
