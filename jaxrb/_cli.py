@@ -218,7 +218,6 @@ def _simulate(spec, progress=False, throw=True):
 
 def _metrics(traj, scene) -> dict:
     """Scalar summary metrics of one unbatched trajectory."""
-
     from ._host import energy as host_energy
     from .plotting import impact_summary as impact_records
 

@@ -72,7 +72,6 @@ def energy_budget(traj, scene) -> dict:
     potential (zeros if there are none); `nonpotential` (their class names); `drift`
     E(t) - E(0) - W(t) (J), or None for a scene with a floor.
     """
-
     from ._host import energy as host_energy
 
     energy = np.asarray(host_energy(scene, traj.states), dtype=float)

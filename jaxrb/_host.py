@@ -34,6 +34,5 @@ def omega_world(state):
 
 @eqx.filter_jit
 def lowest_z(shape, state):
-    """World z (m) of the shape's lowest point (the mass centre's z plus its offset)."""
-    low = shape.lowest_point(state.quat)
-    return state.pos[..., 2] + quat_rotate(state.quat, low)[..., 2]
+    """World z (m) of the shape's lowest point: its distance above the plane z = 0."""
+    return shape.floor_distance(state.pos, state.quat)

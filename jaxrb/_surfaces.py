@@ -180,7 +180,7 @@ class AbstractConeTrack(AbstractCurvedSurface):
             return u, jnp.broadcast_to(side > 0, u.shape[:-1])
         return u, -u[..., 2] >= _safe_norm(u, axis=-1) * jnp.cos(d)
 
-    def track_gap(self, points, side=None):
+    def gap(self, points, side=None):
         """Signed distance (m) of world `points` (..., 3) above the track."""
         d = self.inclination.astype(points.dtype)
         _, rho = self._radial(points)
@@ -197,7 +197,7 @@ class AbstractConeTrack(AbstractCurvedSurface):
         d = self.inclination.astype(centre.dtype)
         return -u[2] / jnp.maximum(_safe_norm(u), jnp.finfo(centre.dtype).tiny) - jnp.cos(d)
 
-    def track_frame(self, centre, side=None):
+    def frame_at(self, centre, side=None):
         """The frame (n, t1, t2, world) of a ball centred at `centre` on the track."""
         d = self.inclination.astype(centre.dtype)
         e_rho, _ = self._radial(centre)
@@ -239,12 +239,6 @@ class Cone(AbstractConeTrack):
         set_contact_coefficients(self, restitution, friction, rolling_resistance, spin_resistance)
         self._set_cone(inclination, height, tip_radius)
 
-    def gap(self, points, side=None):
-        return self.track_gap(points, side)
-
-    def frame_at(self, centre, side=None):
-        return self.track_frame(centre, side)
-
 
 class Wheel(AbstractConeTrack):
     """A roulette wheel's stator, for a ball: the inclined track, the inside of an upright
@@ -255,7 +249,8 @@ class Wheel(AbstractConeTrack):
     Part 0 is the track, part 1 the wall: a ball has one contact point on each, and rolls
     or slides on the track, presses against the wall, or both at once (a two-point
     contact). The wall's frame at azimuth phi: n = -e_rho (towards the axis), t1 = e_z,
-    t2 = e_phi.
+    t2 = e_phi. `gap` is the nearer part's and `frame_at` the track's (each part's:
+    `part_gaps`, `part_frames`).
 
     The wall is smooth: it pushes along its normal only, and `restitution` applies at both
     parts while `friction`, `rolling_resistance` and `spin_resistance` are the track's. (A
@@ -301,20 +296,16 @@ class Wheel(AbstractConeTrack):
         the wall."""
         rho = _safe_norm(points[..., :2], axis=-1)
         wall = self.wall_radius.astype(points.dtype) - rho
-        return jnp.stack([self.track_gap(points, side), wall], axis=-1)
+        return jnp.stack([super().gap(points, side), wall], axis=-1)
 
     def gap(self, points, side=None):
         """Signed distance (m) of world `points` above the nearer part (the smaller gap)."""
         return jnp.min(self.part_gaps(points, side), axis=-1)
 
-    def frame_at(self, centre, side=None):
-        """The track's frame (the wall's: `part_frames`)."""
-        return self.track_frame(centre, side)
-
     def part_frames(self, centre, side=None):
         """Normals n, tangents t1, t2 (each (2, 3), world) of a ball centred at `centre` on the
         track (row 0) and on the wall (row 1)."""
-        n, t1, t2 = self.track_frame(centre, side)
+        n, t1, t2 = self.frame_at(centre, side)  # the track's
         e_rho, _ = self._radial(centre)
         e_z = jnp.array([0.0, 0.0, 1.0], centre.dtype)
         e_phi = jnp.cross(e_z, e_rho)

@@ -62,7 +62,6 @@ def bytes_per_save(scene) -> int:
 
 def file_arrays(traj, scene) -> dict:
     """The arrays of `trajectory.npz` (numpy, one leading index per save time)."""
-
     from ._host import energy as host_energy
     from ._reaction import reaction_arrays
     from .plotting import impact_summary
