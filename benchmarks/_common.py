@@ -154,15 +154,20 @@ def markdown_table(rows: list[Row], device: str) -> str:
 
 
 def plot_work_precision(
-    rows: list[Row], title: str, path: str, ylabel: str = "worst body's error"
+    rows: list[Row],
+    title: str,
+    path: str,
+    ylabel: str = "worst body's error",
+    legend_outside: bool = False,
 ) -> None:
-    """Error vs wall time per body, one line per (method, dtype); saved as PNG."""
+    """Error vs wall time per body, one line per (method, dtype); saved as PNG. With
+    `legend_outside` the legend stands right of the axes (many methods)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(7, 5))
+    fig, ax = plt.subplots(figsize=(11, 5) if legend_outside else (7, 5))
     ax.set_prop_cycle(color=plt.cm.tab20.colors)
     groups: dict[tuple[str, str], list[Row]] = {}
     for r in rows:
@@ -181,7 +186,10 @@ def plot_work_precision(
     ax.set_ylabel(ylabel)
     ax.set_title(title)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
+    if legend_outside:
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0))
+    else:
+        ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

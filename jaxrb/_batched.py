@@ -20,12 +20,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import all_met, is_concrete
+from ._checks import is_concrete
 from ._coordinates import ROTATION, coordinates_for
-from ._inputs import check_concrete_inputs, check_solver_settings, input_result, safe_times
+from ._inputs import check_concrete_inputs, input_result, safe_times
 from ._persistent import entry_point
 from ._results import RESULTS, raise_if_failed
 from ._solve import DEFAULT_MAX_STEPS, default_solver, solve
+from ._solver_settings import solver_settings
 from ._state import State
 from ._trajectory import Trajectory
 
@@ -65,21 +66,18 @@ def _where_members(valid, tree, other):
     )
 
 
+def _unit_inertia_unless(ok, scene):
+    """`scene` with its body's inertia replaced by the unit one (kg m^2) unless `ok`."""
+    body = scene.body
+    unit = jnp.ones(3) if body.principal else jnp.eye(3)
+    inertia = jnp.where(ok, body.inertia, unit.astype(body.inertia.dtype))
+    return eqx.tree_at(lambda s: s.body.inertia, scene, inertia)
+
+
 @entry_point
-def simulate_batched(
-    scene,
-    states0,
-    ts,
-    solver,
-    stepsize_controller,
-    adjoint,
-    progress_meter,
-    dt0,
-    max_steps,
-    settings_ok,
-    batched_scene=False,
-):
-    """`simulate` for a batch (no floor): one solve of all members' coordinates.
+def simulate_batched(scene, states0, ts, settings, batched_scene=False):
+    """`simulate` for a batch (no floor): one solve of all members' coordinates, with the
+    `SolverSettings` `settings` (its controller's norm is the batch's).
 
     A member with bad input starts from rest at the identity attitude with zero rates: it
     takes no part in the step control (its error is zero) and is flagged in `result`.
@@ -89,10 +87,10 @@ def simulate_batched(
     scene_axes = 0 if batched_scene else None
     dtype = ts.dtype
     member = jax.vmap(input_result, in_axes=(scene_axes, 0, None, None))(
-        scene, states0, ts, settings_ok
+        scene, states0, ts, settings.ok
     )
     valid = member == RESULTS.successful
-    times_ok = jnp.all(jnp.isfinite(ts)) & jnp.all(jnp.diff(ts) >= 0) & settings_ok
+    times_ok = jnp.all(jnp.isfinite(ts)) & jnp.all(jnp.diff(ts) >= 0) & settings.ok
     run_ts = safe_times(ts, times_ok)
     rest = State(
         jnp.zeros(3, dtype),
@@ -101,23 +99,27 @@ def simulate_batched(
         jnp.zeros(3, dtype),
     )
     states0 = _where_members(valid, states0, rest)
+    # A member at rest takes no part in the step control if its rates are zero: they are
+    # masked. The rotation of a free body at rest (omega = 0, no moment) has exactly zero
+    # rates already, for any valid inertia; with one scene for all members a bad scene
+    # flags every member, and a unit inertia stands in for its own. So the mask, 15 % of
+    # B1's batched solve, is left out there.
+    masked = batched_scene or coords is not ROTATION
+    rates_scene = scene if masked else _unit_inertia_unless(jnp.any(valid), scene)
 
     def member_rates(scene_, t, y, state0, ok):
         rates = coords.rates(scene_, t, y, state0)
+        if not masked:
+            return rates
         return jax.tree.map(lambda r: jnp.where(ok, r, jnp.zeros_like(r)), rates)
 
     batch_rates = jax.vmap(member_rates, in_axes=(scene_axes, None, 0, 0, 0))
     y0 = jax.vmap(coords.reduce, in_axes=(scene_axes, 0))(scene, states0)
     ys, num_steps, solver_result = solve(
-        lambda t, y: batch_rates(scene, t, y, states0, valid),
+        lambda t, y: batch_rates(rates_scene, t, y, states0, valid),
         y0,
         run_ts,
-        solver=solver,
-        stepsize_controller=stepsize_controller,
-        adjoint=adjoint,
-        dt0=dt0,
-        max_steps=max_steps,
-        progress_meter=progress_meter,
+        settings,
     )
     ys = jax.tree.map(lambda y: jnp.swapaxes(y, 0, 1), ys)  # (T, N, ...) -> (N, T, ...)
     states = jax.vmap(coords.states, in_axes=(scene_axes, 0, None, 0))(scene, ys, run_ts, states0)
@@ -216,13 +218,18 @@ def simulate_batch(
     if throw:
         check_batch_inputs(states0)
         check_concrete_inputs(states0, ts)
-    settings_ok = all_met(check_solver_settings(rtol, atol, dt0, max_steps, throw))
-    if solver is None:
-        solver = default_solver(rtol, batch=True)
-    if adjoint is None:
-        adjoint = dfx.RecursiveCheckpointAdjoint()
-    if dt0 is not None:
-        dt0 = jnp.asarray(dt0, dtype)
+    settings = solver_settings(
+        solver=default_solver(rtol, batch=True) if solver is None else solver,
+        rtol=rtol,
+        atol=atol,
+        dt0=dt0,
+        max_steps=max_steps,
+        stepsize_controller=None,
+        adjoint=adjoint,
+        progress_meter=None,
+        throw=throw,
+        dtype=dtype,
+    )
     # tolerances are traced values: changing them does not recompile
     rtol, atol = jnp.asarray(rtol, dtype), jnp.asarray(atol, dtype)
     n_bodies = states0.pos.shape[0]
@@ -230,23 +237,12 @@ def simulate_batch(
     if not devices:
         raise ValueError("devices must name at least one device")
 
-    def run(scene_part, states_part, rtol, atol, settings_ok):
+    def run(scene_part, states_part, rtol, atol, ok):
         controller = dfx.PIDController(rtol=rtol, atol=atol, norm=batch_rms_norm)
-        return simulate_batched(
-            scene_part,
-            states_part,
-            ts,
-            solver,
-            controller,
-            adjoint,
-            dfx.NoProgressMeter(),
-            dt0,
-            max_steps,
-            settings_ok,
-            batched_scene,
-        )
+        part = eqx.tree_at(lambda s: (s.controller, s.ok), settings, (controller, ok))
+        return simulate_batched(scene_part, states_part, ts, part, batched_scene)
 
-    args = (rtol, atol, jnp.asarray(settings_ok))
+    args = (rtol, atol, settings.ok)
     if len(devices) == 1:
         traj = run(scene, states0, *args)
     else:

@@ -1,7 +1,6 @@
 """Input checks of `simulate`, shared by the smooth and the contact paths: a traceable result
 code per batch member, and early errors for concrete bad input."""
 
-import diffrax as dfx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -50,24 +49,6 @@ def save_times(ts) -> jax.Array:
     if ts.ndim != 1 or ts.shape[0] < 1:
         raise ValueError(f"ts must be a 1-D array of save times, got shape {ts.shape}")
     return ts if jnp.issubdtype(ts.dtype, jnp.floating) else ts.astype(float)
-
-
-def solver_settings_ok(rtol, atol, dt0, max_steps, throw, stepsize_controller) -> jax.Array:
-    """Whether the solver settings are valid (a traceable flag); raises for concrete bad
-    ones as `check_solver_settings` does. A given `stepsize_controller` replaces rtol and
-    atol, which are then not checked."""
-    own = stepsize_controller is None
-    return all_met(
-        check_solver_settings(rtol if own else 1.0, atol if own else 1.0, dt0, max_steps, throw)
-    )
-
-
-def default_controller(stepsize_controller, rtol, atol):
-    """The given controller, else a `PIDController(rtol, atol)` with array tolerances (new
-    values then need no recompilation)."""
-    if stepsize_controller is not None:
-        return stepsize_controller
-    return dfx.PIDController(rtol=jnp.asarray(rtol), atol=jnp.asarray(atol))
 
 
 def _floor_checks(floor):

@@ -13,17 +13,11 @@ import optimistix as optx
 from ._batched import batch_rms_norm, check_batch_inputs, simulate_batched
 from ._checks import as_float_array
 from ._coordinates import FullState, coordinates_for
-from ._inputs import (
-    check_concrete_inputs,
-    default_controller,
-    input_result,
-    safe_times,
-    save_times,
-    solver_settings_ok,
-)
+from ._inputs import check_concrete_inputs, input_result, safe_times, save_times
 from ._persistent import entry_point
 from ._results import RESULTS, raise_if_failed
 from ._solve import DEFAULT_ATOL, DEFAULT_MAX_STEPS, DEFAULT_RTOL, default_solver, solve
+from ._solver_settings import solver_settings
 from ._state import State
 from ._trajectory import Trajectory
 from .contact import ContactOptions
@@ -147,54 +141,36 @@ def simulate(
         if n_batch is not None:
             check_batch_inputs(state0)
         check_concrete_inputs(state0, ts)
-    settings_ok = solver_settings_ok(rtol, atol, dt0, max_steps, throw, stepsize_controller)
     if solver is None:
         free = scene.floor is None and stepsize_controller is None
         solver = default_solver(rtol, n_batch is not None) if free else dfx.Tsit5()
-    stepsize_controller = default_controller(stepsize_controller, rtol, atol)
-    if dt0 is not None:
-        dt0 = jnp.asarray(dt0, ts.dtype)
-    if adjoint is None:
-        adjoint = dfx.RecursiveCheckpointAdjoint()
+    settings = solver_settings(
+        solver=solver,
+        rtol=rtol,
+        atol=atol,
+        dt0=dt0,
+        max_steps=max_steps,
+        stepsize_controller=stepsize_controller,
+        adjoint=adjoint,
+        progress_meter=progress_meter,
+        throw=throw,
+        dtype=ts.dtype,
+    )
     if scene.floor is not None:
         contact = ContactOptions.from_shortcuts(contact, max_impacts, rest_speed)
 
         def one(s):
-            return simulate_contact(
-                scene,
-                s,
-                ts,
-                solver=solver,
-                stepsize_controller=stepsize_controller,
-                adjoint=adjoint,
-                dt0=dt0,
-                max_steps=max_steps,
-                throw=throw,
-                options=contact,
-                settings_ok=settings_ok,
-            )
+            return simulate_contact(scene, s, ts, settings, throw=throw, options=contact)
 
         return one(state0) if n_batch is None else _vmap_members(one, state0)
-    if progress_meter is None:
-        progress_meter = dfx.NoProgressMeter()
     state0 = jax.tree.map(lambda x: jnp.asarray(x, ts.dtype), state0)
     if n_batch is None:
-        core = _simulate_smooth
+        traj = _simulate_smooth(scene, state0, ts, settings)
     else:
-        core = simulate_batched
-        stepsize_controller = batch_controller(stepsize_controller)
-    traj = core(
-        scene,
-        state0,
-        ts,
-        solver,
-        stepsize_controller,
-        adjoint,
-        progress_meter,
-        dt0,
-        max_steps,
-        settings_ok,
-    )
+        settings = eqx.tree_at(
+            lambda s: s.controller, settings, batch_controller(settings.controller)
+        )
+        traj = simulate_batched(scene, state0, ts, settings)
     if throw:  # outside the compiled function: throw=True/False share one compilation
         traj = raise_if_failed(traj)
     return traj
@@ -215,32 +191,17 @@ def _vmap_members(fn, states0):
 
 
 @entry_point
-def _simulate_smooth(
-    scene,
-    state0,
-    ts,
-    solver,
-    stepsize_controller,
-    adjoint,
-    progress_meter,
-    dt0,
-    max_steps,
-    settings_ok,
-):
-    """One body, no floor: one diffrax solve in the scene's coordinates."""
+def _simulate_smooth(scene, state0, ts, settings):
+    """One body, no floor: one diffrax solve in the scene's coordinates (`settings`: a
+    `SolverSettings`)."""
     coords = coordinates_for(scene)
-    result = input_result(scene, state0, ts, settings_ok)
+    result = input_result(scene, state0, ts, settings.ok)
     run_ts = safe_times(ts, result == RESULTS.successful)
     ys, num_steps, solver_result = solve(
         lambda t, y: coords.rates(scene, t, y, state0),
         coords.reduce(scene, state0),
         run_ts,
-        solver=solver,
-        stepsize_controller=stepsize_controller,
-        adjoint=adjoint,
-        dt0=dt0,
-        max_steps=max_steps,
-        progress_meter=progress_meter,
+        settings,
     )
     states = coords.states(scene, ys, run_ts, state0)
     drift = jnp.max(jnp.abs(coords.raw_quat_norm(scene, ys) - 1))

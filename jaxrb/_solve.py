@@ -82,8 +82,9 @@ def save_at(ts) -> dfx.SaveAt:
     return dfx.SaveAt(t0=True, ts=ts[1:-1], t1=True)
 
 
-def solve(rhs, y0, ts, *, solver, stepsize_controller, adjoint, dt0, max_steps, progress_meter):
-    """Integrate dy/dt = rhs(t, y) from ts[0] to ts[-1] (any pytree y).
+def solve(rhs, y0, ts, settings):
+    """Integrate dy/dt = rhs(t, y) from ts[0] to ts[-1] (any pytree y) with the
+    `SolverSettings` `settings`.
 
     **Returns:** `(ys, num_accepted_steps, result)`: `ys` like y0 with a leading time axis
     (T, ...) holding y at `ts`; the diffrax result code. Never raises (throw=False): the
@@ -92,16 +93,11 @@ def solve(rhs, y0, ts, *, solver, stepsize_controller, adjoint, dt0, max_steps, 
     with checks_without_host_callbacks():
         sol = dfx.diffeqsolve(
             dfx.ODETerm(lambda t, y, args: rhs(t, y)),
-            solver,
             t0=ts[0],
             t1=ts[-1],
-            dt0=dt0,
             y0=y0,
             saveat=save_at(ts),
-            stepsize_controller=stepsize_controller,
-            adjoint=adjoint,
-            max_steps=max_steps,
-            progress_meter=progress_meter,
             throw=False,
+            **settings.solve_kwargs(),
         )
     return sol.ys, sol.stats["num_accepted_steps"], sol.result

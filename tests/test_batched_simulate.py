@@ -123,6 +123,22 @@ def test_bad_members_flagged_and_the_others_unaffected(states, gravity_run):
         assert bool(jnp.all(jnp.isnan(getattr(traj.states, name)[np.array([2, 4])])))
 
 
+@pytest.mark.parametrize("inertia", [[jnp.nan, 2.0, 3.0], jnp.diag(jnp.array([1.0, jnp.nan, 3.0]))])
+def test_bad_shared_scene_flags_every_member_and_takes_no_time(states, inertia):
+    """A traced bad inertia (principal moments or the full tensor) shared by the batch:
+    every member is flagged, with NaN states, and the solve does not grind on (a few steps,
+    not max_steps)."""
+    run = jax.jit(
+        lambda J: jaxrb.simulate(
+            jaxrb.Scene(jaxrb.RigidBody(2.0, J)), states, TS, throw=False, max_steps=1000
+        )
+    )
+    traj = run(jnp.asarray(inertia))
+    assert all(int(r) == jaxrb.RESULTS.invalid_inertia._value for r in traj.result._value)
+    assert int(traj.num_steps[0]) <= 10
+    assert bool(jnp.all(jnp.isnan(traj.states.omega)))
+
+
 def test_bad_member_raises_naming_the_member(states):
     bad = _with_bad_members(states)
     with pytest.raises(ValueError, match=r"state0\.omega .*batch member 2"):

@@ -22,6 +22,7 @@ from .._quaternion import quat_normalize
 from .._results import RESULTS, raise_if_failed
 from .._shapes import Sphere
 from .._solve import checks_without_host_callbacks
+from .._solver_settings import SolverSettings
 from .._state import State
 from .._trajectory import Trajectory
 from ._events import (
@@ -89,23 +90,10 @@ def check_contact_scene(scene, options) -> None:
         raise TypeError(f"options must be a ContactOptions, got {type(options).__name__}")
 
 
-def simulate_contact(
-    scene,
-    state0,
-    ts,
-    *,
-    solver,
-    stepsize_controller,
-    adjoint,
-    dt0,
-    max_steps,
-    throw,
-    options,
-    settings_ok=True,
-) -> Trajectory:
-    """`jaxrb.simulate` for a scene with a floor (it resolves the solver, controller and
-    adjoint defaults). `options` is a `ContactOptions`; `settings_ok` whether the solver
-    settings are valid."""
+def simulate_contact(scene, state0, ts, settings, *, throw, options) -> Trajectory:
+    """`jaxrb.simulate` for a scene with a floor, with the `SolverSettings` `settings` (each
+    smooth segment is one solve with them; the progress meter is not used). `options` is a
+    `ContactOptions`."""
     check_contact_scene(scene, options)
     ts = jnp.asarray(ts)
     state0 = jax.tree.map(lambda x: jnp.asarray(x, ts.dtype), state0)
@@ -120,25 +108,12 @@ def simulate_contact(
                 f"the body starts below the floor: its lowest point is {-d0:.3g} m under the "
                 "floor plane"
             )
-    kind = "lax" if isinstance(adjoint, dfx.ForwardMode) else "checkpointed"
+    kind = "lax" if isinstance(settings.adjoint, dfx.ForwardMode) else "checkpointed"
     # also around the call: under jax.grad / jacfwd JAX differentiates the compiled
     # program's jaxpr here, tracing the derivative of each event time's root find (a linear
     # solve with its own check) only now
     with checks_without_host_callbacks():
-        traj = _simulate_contact(
-            scene,
-            state0,
-            ts,
-            solver,
-            stepsize_controller,
-            adjoint,
-            dt0,
-            max_steps,
-            options,
-            tol,
-            kind,
-            settings_ok,
-        )
+        traj = _simulate_contact(scene, state0, ts, settings, options, tol, kind)
     if throw:  # outside the compiled program: throw=True and False share one compilation
         traj = raise_if_failed(traj)
     return traj
@@ -158,20 +133,15 @@ class _Segment(eqx.Module):
 
 class ContactProgram(eqx.Module):
     """What every body of a contact simulation shares: the shape's contact model, the
-    solver settings, the contact options and tolerances. `start`, `advance` and
+    `SolverSettings`, the contact options and tolerances. `start`, `advance` and
     `trajectory` are the pieces of a simulation (the loop of `simulate` runs them for one
     body, the lanes of `simulate_throws` for many); the scene is an argument of each, so
     that every body may have its own parameters."""
 
     model: object
-    solver: object
-    controller: object
-    adjoint: object
-    dt0: object
-    max_steps: int = eqx.field(static=True)
+    settings: SolverSettings
     options: ContactOptions = eqx.field(static=True)
     tol: object = eqx.field(static=True)
-    settings_ok: object
 
     def values(self, t, y, mode, scene):
         """The condition vector of `mode` at `y` (docs/contact.md, section 4)."""
@@ -183,7 +153,7 @@ class ContactProgram(eqx.Module):
         first pass (which applies the maps of the start: a body may start touching)."""
         options, tol = self.options, self.tol
         dtype = ts.dtype
-        result = input_result(scene, state0, ts, self.settings_ok)
+        result = input_result(scene, state0, ts, self.settings.ok)
         if not isinstance(scene.body.shape, Sphere):  # traced resistances: checked here
             floor = scene.floor
             resists = (floor.rolling_resistance != 0) | (floor.spin_resistance != 0)
@@ -296,6 +266,7 @@ class ContactProgram(eqx.Module):
         # ran 4x slower than with 3 saves, and 6x slower than a loop over the balls
         idle = 64 * jnp.finfo(ts.dtype).eps * jnp.maximum(jnp.abs(t_end), 1.0)
         t0 = jnp.where(done, t_end - idle, t0)
+        settings = self.settings
         with checks_without_host_callbacks():
             sol = dfx.diffeqsolve(
                 dfx.ODETerm(
@@ -306,18 +277,18 @@ class ContactProgram(eqx.Module):
                         )
                     )
                 ),
-                self.solver,
+                settings.solver,
                 t0=t0,
                 t1=t_end,
-                dt0=self.dt0,
+                dt0=settings.dt0,
                 y0=y,
                 args=_Segment(scene, mode, offsets, limit0, ~done),
                 saveat=dfx.SaveAt(
                     subs=[dfx.SubSaveAt(ts=jnp.clip(ts, t0, t_end)), dfx.SubSaveAt(t1=True)]
                 ),
-                stepsize_controller=self.controller,
-                adjoint=self.adjoint,
-                max_steps=self.max_steps,
+                stepsize_controller=settings.controller,
+                adjoint=settings.adjoint,
+                max_steps=settings.max_steps,
                 event=_event(model, tol),
                 throw=False,
             )
@@ -415,40 +386,23 @@ def _event(model, tol):
     return dfx.Event(condition, root_finder=root_finder, direction=False)
 
 
-def contact_program(
-    scene, solver, stepsize_controller, adjoint, dt0, max_steps, options, tol, settings_ok
-) -> ContactProgram:
-    """The `ContactProgram` of `scene`'s shape with these solver settings."""
+def contact_program(scene, settings, options, tol) -> ContactProgram:
+    """The `ContactProgram` of `scene`'s shape with the `SolverSettings` `settings`; the
+    step-size controller learns each segment's step limit."""
     model = contact_model(scene.body.shape, scene.floor.parts)
     controller = limited(
-        stepsize_controller,
+        settings.controller,
         traced_once(
             lambda t, y, args: gap_step_limit(t, y, args.mode, args.offsets, args.scene, model, tol)
         ),
     )
-    return ContactProgram(
-        model, solver, controller, adjoint, dt0, max_steps, options, tol, settings_ok
-    )
+    settings = eqx.tree_at(lambda s: s.controller, settings, controller)
+    return ContactProgram(model, settings, options, tol)
 
 
 @entry_point
-def _simulate_contact(
-    scene,
-    state0,
-    ts,
-    solver,
-    stepsize_controller,
-    adjoint,
-    dt0,
-    max_steps,
-    options,
-    tol,
-    loop_kind,
-    settings_ok,
-):
-    program = contact_program(
-        scene, solver, stepsize_controller, adjoint, dt0, max_steps, options, tol, settings_ok
-    )
+def _simulate_contact(scene, state0, ts, settings, options, tol, loop_kind):
+    program = contact_program(scene, settings, options, tol)
     carry = eqxi.while_loop(
         lambda c: ~jnp.all(c["done"]),
         lambda c: program.advance(scene, c),

@@ -16,8 +16,9 @@ import jax
 import jax.numpy as jnp
 
 from .._checks import as_float_array
-from .._inputs import default_controller, save_times, solver_settings_ok
+from .._inputs import save_times
 from .._persistent import entry_point
+from .._solver_settings import solver_settings
 from .._state import State
 from ._driver import check_contact_scene, contact_program
 from ._options import ContactOptions
@@ -92,54 +93,33 @@ def simulate_throws(
     contact = ContactOptions.from_shortcuts(contact, max_impacts, rest_speed)
     one_scene = jax.tree.map(lambda x: x[0], scene) if batched_scene else scene
     check_contact_scene(one_scene, contact)
-    settings_ok = solver_settings_ok(rtol, atol, dt0, max_steps, False, stepsize_controller)
-    if solver is None:
-        solver = dfx.Tsit5()
-    stepsize_controller = default_controller(stepsize_controller, rtol, atol)
-    if dt0 is not None:
-        dt0 = jnp.asarray(dt0, ts.dtype)
+    settings = solver_settings(
+        solver=dfx.Tsit5() if solver is None else solver,
+        rtol=rtol,
+        atol=atol,
+        dt0=dt0,
+        max_steps=max_steps,
+        stepsize_controller=stepsize_controller,
+        adjoint=None,
+        progress_meter=None,
+        throw=False,
+        dtype=ts.dtype,
+    )
     states0 = jax.tree.map(lambda x: jnp.asarray(x, ts.dtype), states0)
     return _throws(
-        scene,
-        states0,
-        ts,
-        solver,
-        stepsize_controller,
-        dt0,
-        max_steps,
-        contact,
-        contact.resolved(ts.dtype),
-        settings_ok,
-        lanes,
-        batched_scene,
+        scene, states0, ts, settings, contact, contact.resolved(ts.dtype), lanes, batched_scene
     )
 
 
 @entry_point
-def _throws(
-    scene,
-    states0,
-    ts,
-    solver,
-    stepsize_controller,
-    dt0,
-    max_steps,
-    options,
-    tol,
-    settings_ok,
-    lanes,
-    batched_scene,
-):
+def _throws(scene, states0, ts, settings, options, tol, lanes, batched_scene):
     n = states0.pos.shape[0]
-    adjoint = dfx.RecursiveCheckpointAdjoint()
 
     def scene_of(i):
         return jax.tree.map(lambda x: x[i], scene) if batched_scene else scene
 
     def program_of(s):
-        return contact_program(
-            s, solver, stepsize_controller, adjoint, dt0, max_steps, options, tol, settings_ok
-        )
+        return contact_program(s, settings, options, tol)
 
     def start(i):
         s = scene_of(i)
