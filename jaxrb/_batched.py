@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import is_concrete
+from ._checks import as_computed, is_concrete
 from ._coordinates import ROTATION, coordinates_for
 from ._inputs import check_concrete_inputs, input_result, safe_times
 from ._persistent import entry_point
@@ -54,7 +54,7 @@ def check_batch_inputs(states0: State) -> None:
                     f"{int(np.argmax(bad))}"
                 )
     if is_concrete(states0.quat):
-        zero = np.all(np.asarray(states0.quat) == 0, axis=-1)
+        zero = np.all(as_computed(states0.quat) == 0, axis=-1)
         if np.any(zero):
             raise ValueError(f"state0.quat has zero norm in batch member {int(np.argmax(zero))}")
 

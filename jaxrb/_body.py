@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import inertia as _inertia
-from ._checks import is_concrete
+from ._checks import as_computed, is_concrete
 from ._shapes import AbstractShape
 from ._typing import Mat3
 
@@ -68,11 +68,13 @@ class RigidBody(eqx.Module):
 
     def __check_init__(self):
         if is_concrete(self.mass) and np.ndim(self.mass) >= 0:
-            m = np.asarray(self.mass)
+            m = as_computed(self.mass)  # a subnormal mass is 0, as in the simulation
             if not np.all(np.isfinite(m)):
                 raise ValueError(f"mass must be finite, got {m}")
             if np.any(m <= 0):
-                raise ValueError(f"mass must be > 0, got {m}")
+                given = np.asarray(self.mass)
+                subnormal = " (subnormal: it computes as 0)" if np.any(given != m) else ""
+                raise ValueError(f"mass must be > 0, got {given}{subnormal}")
         if is_concrete(self.inertia):
             _inertia.check_inertia(self.inertia_matrix, name="inertia")
 

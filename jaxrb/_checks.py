@@ -51,10 +51,20 @@ class Requirement(NamedTuple):
     ok: jax.Array
 
 
+def as_computed(x) -> np.ndarray:
+    """A concrete `x` as a numpy array in which subnormal floats are 0, as XLA on a CPU
+    computes with them (it flushes them to 0): a concrete check made in numpy then agrees
+    with the same check traced. E.g. a mass of 1e-320 kg is > 0 in neither."""
+    a = np.asarray(x)
+    if np.issubdtype(a.dtype, np.floating):
+        a = np.where(np.abs(a) < np.finfo(a.dtype).tiny, np.zeros_like(a), a)
+    return a
+
+
 def _namespace(x):
-    """(numpy, x as a numpy array) for concrete values, checked without compiling anything;
-    (jax.numpy, x) for traced ones."""
-    return (np, np.asarray(x)) if is_concrete(x) else (jnp, x)
+    """(numpy, x as a numpy array, subnormals 0) for concrete values, checked without
+    compiling anything; (jax.numpy, x) for traced ones."""
+    return (np, as_computed(x)) if is_concrete(x) else (jnp, x)
 
 
 def finite(x) -> jax.Array:
@@ -62,14 +72,32 @@ def finite(x) -> jax.Array:
     return xp.isfinite(x)
 
 
+def _smallest_normal(x, xp):
+    """The smallest positive normal number of x's float dtype (0 for other dtypes). XLA on
+    a CPU flushes subnormals to 0 in some programs and not in others, so every check that
+    compares with 0 counts |x| below it as 0."""
+    return xp.finfo(x.dtype).tiny if xp.issubdtype(x.dtype, xp.floating) else 0
+
+
 def finite_positive(x) -> jax.Array:
+    """Finite and > 0 (a subnormal counts as 0)."""
     xp, x = _namespace(x)
-    return xp.isfinite(x) & (x > 0)
+    tiny = _smallest_normal(x, xp)
+    return xp.isfinite(x) & ((x >= tiny) if tiny else (x > 0))
 
 
 def finite_nonnegative(x) -> jax.Array:
+    """Finite and >= 0 (a subnormal counts as 0)."""
     xp, x = _namespace(x)
-    return xp.isfinite(x) & (x >= 0)
+    tiny = _smallest_normal(x, xp)
+    return xp.isfinite(x) & ((x > -tiny) if tiny else (x >= 0))
+
+
+def nonzero_rows(q) -> jax.Array:
+    """Whether each row of `q` (last axis) has an entry that is not 0 (a subnormal counts
+    as 0): a quaternion with a norm."""
+    xp, q = _namespace(q)
+    return xp.any(xp.abs(q) >= _smallest_normal(q, xp), axis=-1)
 
 
 def all_met(requirements) -> jax.Array:

@@ -9,9 +9,11 @@ from . import inertia as _inertia
 from ._checks import (
     Requirement,
     all_met,
+    as_computed,
     finite_nonnegative,
     finite_positive,
     is_concrete,
+    nonzero_rows,
     raise_unmet,
 )
 from ._results import RESULTS
@@ -75,13 +77,13 @@ def input_result(scene, state0: State, ts, settings_ok=True) -> RESULTS:
     """
     body = scene.body
     checks = [
-        (jnp.all(jnp.isfinite(body.mass) & (body.mass > 0)), RESULTS.invalid_mass),
+        (jnp.all(finite_positive(body.mass)), RESULTS.invalid_mass),
         (_inertia.is_valid_inertia(body.inertia_matrix), RESULTS.invalid_inertia),
         (
             jnp.all(jnp.array([jnp.all(jnp.isfinite(x)) for x in jax.tree.leaves(state0)])),
             RESULTS.nonfinite_state,
         ),
-        (jnp.all(jnp.any(state0.quat != 0, axis=-1)), RESULTS.zero_quaternion),
+        (jnp.all(nonzero_rows(state0.quat)), RESULTS.zero_quaternion),
         (jnp.all(jnp.isfinite(ts)), RESULTS.nonfinite_times),
         (jnp.all(jnp.diff(ts) >= 0), RESULTS.decreasing_times),
         (settings_ok, RESULTS.invalid_tolerances),
@@ -121,5 +123,5 @@ def check_concrete_inputs(state0: State, ts) -> None:
         if is_concrete(x):
             if not np.all(np.isfinite(np.asarray(x))):
                 raise ValueError(f"state0.{name} contains non-finite values (NaN or inf)")
-    if is_concrete(state0.quat) and np.any(np.all(np.asarray(state0.quat) == 0, axis=-1)):
+    if is_concrete(state0.quat) and np.any(np.all(as_computed(state0.quat) == 0, axis=-1)):
         raise ValueError("state0.quat has zero norm")

@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import as_float_array, is_concrete
+from ._checks import as_computed, as_float_array, is_concrete
 from ._typing import Float, Mat3, Quat, Vec3
 
 
@@ -54,7 +54,7 @@ def unit_vector(x):
 
 def require_nonzero(q, name: str) -> None:
     """Raise a ValueError naming `name` if a concrete quaternion has zero norm."""
-    if is_concrete(q) and np.any(np.all(np.asarray(q) == 0, axis=-1)):
+    if is_concrete(q) and np.any(np.all(as_computed(q) == 0, axis=-1)):
         raise ValueError(f"{name} has zero norm: it is no attitude")
 
 

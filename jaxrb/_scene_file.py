@@ -50,6 +50,7 @@ import dataclasses
 import difflib
 import math
 import re
+import sys
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -214,7 +215,7 @@ class _Table:
         if not math.isfinite(_float(value)):
             self.fail(key, f"must be finite, got {_short(value)}")
         value = float(value)
-        if positive and value <= 0:
+        if positive and value < sys.float_info.min:  # a subnormal number computes as 0
             self.fail(key, f"must be > 0, got {value}")
         if nonnegative and value < 0:
             self.fail(key, f"must be >= 0, got {value}")

@@ -291,6 +291,34 @@ def test_zero_quaternion_raises_when_concrete_and_is_nan_under_jit():
     assert jnp.all(jnp.isnan(angles))
 
 
+def test_subnormal_mass_and_quaternion_count_as_zero_everywhere():
+    """XLA on a CPU flushes subnormal floats to 0 in some programs and not in others: a
+    mass of 1e-320 kg or a quaternion of norm 1e-320 is refused alike by the constructor,
+    the scene-file reader, the concrete checks and the traced flag."""
+    from jaxrb._inputs import input_result
+    from jaxrb._scene_file import SceneFileError, parse_scene
+
+    with pytest.raises(ValueError, match=r"mass must be > 0, got 1e-320 \(subnormal"):
+        jaxrb.RigidBody(1e-320, I123)
+    doc = {
+        "body": {"mass": 1e-320, "inertia": [1.0, 2.0, 3.0]},
+        "simulation": {"t_end": 1.0},
+    }
+    with pytest.raises(SceneFileError, match=r"\[body\]\.mass: must be > 0"):
+        parse_scene(doc, source="s.toml")
+    flag = jax.jit(
+        lambda m, q: input_result(
+            jaxrb.Scene(jaxrb.RigidBody(m, I123)), jaxrb.make_state(quat=q), TS
+        )
+    )
+    unit = jnp.array([1.0, 0.0, 0.0, 0.0])
+    assert flag(1e-320, unit) == jaxrb.RESULTS.invalid_mass
+    assert flag(1.0, 1e-320 * unit) == jaxrb.RESULTS.zero_quaternion
+    assert flag(1e-300, 1e-300 * unit) == jaxrb.RESULTS.successful  # normal numbers: fine
+    with pytest.raises(ValueError, match="zero norm"):
+        jaxrb.simulate(scene_with(), jaxrb.make_state(quat=1e-320 * unit), TS)
+
+
 @pytest.mark.parametrize("scale", [1e-300, 1e300])
 def test_inertia_checks_hold_at_any_scale(scale):
     jaxrb.RigidBody(1.0, jnp.array([1.0, 2.0, 2.5]) * scale)  # valid: accepted

@@ -10,7 +10,7 @@ import tomllib
 import jax
 import jax.numpy as jnp
 import numpy as np
-from hypothesis import given, settings, strategies as st
+from hypothesis import example, given, settings, strategies as st
 
 import jaxrb
 from jaxrb._inputs import input_result
@@ -81,8 +81,17 @@ def mutated_scenes(draw):
     return name, doc
 
 
+def _with_subnormal_mass():
+    """Found by this test: a mass of 1e-320 kg (subnormal) was accepted by the reader and
+    flagged by the simulation's check."""
+    doc = copy.deepcopy(EXAMPLES["pendulum"])
+    doc["body"]["mass"] = 1e-320
+    return "pendulum", doc
+
+
 @settings(max_examples=400, deadline=None)
 @given(mutated_scenes())
+@example(_with_subnormal_mass())
 def test_mutated_scene_file_parses_or_names_the_problem(case):
     name, doc = case
     try:
