@@ -52,9 +52,10 @@ class Requirement(NamedTuple):
 
 
 def as_computed(x) -> np.ndarray:
-    """A concrete `x` as a numpy array in which subnormal floats are 0, as XLA on a CPU
-    computes with them (it flushes them to 0): a concrete check made in numpy then agrees
-    with the same check traced. E.g. a mass of 1e-320 kg is > 0 in neither."""
+    """A concrete `x` as a numpy array in which subnormal floats are 0. XLA on a CPU flushes
+    them to 0 in some programs and not in others; with the checks below, which count them
+    as 0 too, a concrete check made in numpy agrees with the same check traced. E.g. a mass
+    of 1e-320 kg is > 0 in neither."""
     a = np.asarray(x)
     if np.issubdtype(a.dtype, np.floating):
         a = np.where(np.abs(a) < np.finfo(a.dtype).tiny, np.zeros_like(a), a)

@@ -93,7 +93,8 @@ def simulate(
       `ConstantStepSize()` with `dt0` for fixed steps.
     - `adjoint`: diffrax adjoint; default `RecursiveCheckpointAdjoint()` (reverse mode). For
       forward-mode differentiation (`jax.jacfwd`, `jax.jvp`) pass `diffrax.ForwardMode()`.
-    - `progress_meter`: e.g. `diffrax.TqdmProgressMeter()` for long runs.
+    - `progress_meter`: e.g. `diffrax.TqdmProgressMeter()` for long runs, scenes without a
+      floor only (the contact engine's many short segments report no progress).
     - `throw`: if True (default) raise on bad input or solver failure (concrete bad values
       raise a ValueError naming the field, and for a batch the member, before anything is
       compiled); if False, return a per-trajectory `result` code instead, for concrete and
