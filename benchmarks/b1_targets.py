@@ -40,27 +40,10 @@ import jaxrb  # noqa: E402
 from jaxrb._batched import batch_rms_norm  # noqa: E402
 
 try:
-    from . import _common as C
-    from .b1_torque_free import (
-        INERTIA,
-        T_END,
-        initial_omegas,
-        make_errors,
-        mujoco_runner,
-        plain_rhs,
-        scene_for,
-    )
+    from . import _common as C, b1_torque_free as B1
 except ImportError:  # run as a script
     import _common as C  # type: ignore
-    from b1_torque_free import (  # type: ignore
-        INERTIA,
-        T_END,
-        initial_omegas,
-        make_errors,
-        mujoco_runner,
-        plain_rhs,
-        scene_for,
-    )
+    import b1_torque_free as B1  # type: ignore
 
 BOUND = 1e-8  # the error the targets are stated at
 TOLS = (1e-7, 1e-8, 3e-9, 1e-9, 7e-10, 5e-10, 4e-10, 3e-10, 2e-10, 1e-10)
@@ -73,11 +56,10 @@ def methods(n):
     """(name, function of the tolerance returning (omega_T, quat_T, steps per body), bodies)
     for every adaptive method: on the same N bodies, and `jaxrb.simulate` on the first of
     them alone (no `jax.vmap`: what decides the default solver for one body)."""
-    omega0 = initial_omegas(n)
-    scene = scene_for(jnp.float64)
-    ts = jnp.array([0.0, T_END])
+    omega0 = B1.initial_omegas(n)
+    scene = B1.scene_for(jnp.float64)
+    ts = jnp.array([0.0, B1.T_END])
     states0 = jaxrb.make_state(omega=omega0)
-    rhs = plain_rhs(jnp.asarray(INERTIA))
 
     def through_jaxrb(solver, batched, alone=False):
         def one(s, tol):
@@ -96,25 +78,11 @@ def methods(n):
     def plain(solver, batch=False):
         """The hand-written rhs: vmapped (each body its own solve), or with `batch` one solve
         of all bodies whose controller takes the worst body's RMS norm (no jaxrb around it)."""
-
-        def one(omega, tol):
-            quat = jnp.zeros(omega.shape[:-1] + (4,)).at[..., 0].set(1.0)
-            norm = {"norm": batch_rms_norm} if batch else {}
-            sol = dfx.diffeqsolve(
-                dfx.ODETerm(rhs),
-                solver,
-                0.0,
-                T_END,
-                None,
-                (quat, omega),
-                saveat=dfx.SaveAt(t1=True),
-                stepsize_controller=dfx.PIDController(rtol=tol, atol=tol, **norm),
-                max_steps=100_000,
-                throw=False,
-            )
-            return sol.ys[1][-1], sol.ys[0][-1], sol.stats["num_accepted_steps"]
-
-        fn = jax.jit(one if batch else jax.vmap(one, in_axes=(0, None)))
+        if batch:
+            fn = jax.jit(lambda w, tol: B1.plain_solve(solver, w, ts, tol, batch_rms_norm))
+        else:
+            one = lambda w, tol: B1.plain_solve(solver, w, ts, tol)  # noqa: E731
+            fn = jax.jit(jax.vmap(one, in_axes=(0, None)))
         return lambda tol: fn(omega0, jnp.asarray(tol))
 
     return omega0, [
@@ -137,14 +105,14 @@ def methods(n):
 def measure(n, rounds):
     """Rows (method, setting, error, best us/body, steps per body) of every configuration."""
     omega0, adaptive = methods(n)
-    errors = {n: make_errors(omega0)[0], 1: make_errors(omega0[:1])[0]}
+    errors = {n: B1.make_errors(omega0)[0], 1: B1.make_errors(omega0[:1])[0]}
     configs = [
         (name, f"tol {tol:.0e}", lambda f=f, tol=tol: f(tol), k)
         for name, f, k in adaptive
         for tol in TOLS
     ]
     for h in MUJOCO_STEPS:
-        go = mujoco_runner(omega0, h)
+        go = B1.mujoco_runner(omega0, h)
         if go is not None:
             configs.append(("MuJoCo C RK4, N bodies in one scene", f"h {h:g}", go, n))
     found = {}

@@ -421,29 +421,36 @@ def plain_rhs(inertia):
     return rhs
 
 
+def plain_solve(solver, omega, ts, tol, norm=None):
+    """Plain diffrax on `plain_rhs` from the identity attitude with body omega `omega` ((3,),
+    or (N, 3) as one solve, then give `norm`, e.g. the worst body's RMS), saving at ts[-1]
+    only: (omega_T, quat_T, accepted steps)."""
+    rhs = plain_rhs(jnp.asarray(INERTIA, omega.dtype))
+    quat = jnp.zeros(omega.shape[:-1] + (4,), omega.dtype).at[..., 0].set(1.0)
+    kwargs = {} if norm is None else {"norm": norm}
+    sol = dfx.diffeqsolve(
+        dfx.ODETerm(rhs),
+        solver,
+        ts[0],
+        ts[-1],
+        None,
+        (quat, omega),
+        saveat=dfx.SaveAt(t1=True),
+        stepsize_controller=dfx.PIDController(rtol=tol, atol=tol, **kwargs),
+        max_steps=100_000,
+        throw=False,
+    )
+    return sol.ys[1][-1], sol.ys[0][-1], sol.stats["num_accepted_steps"]
+
+
 def plain_rows(solver_name, solver, omega0, ts, tols, dname, error):
     """Plain diffrax on `plain_rhs`, saving at t1 only: vmapped (each body its own solve) and
     as one solve of the whole batch with the worst body's RMS norm in the PIDController."""
     n = omega0.shape[0]
     dt = omega0.dtype
-    rhs = plain_rhs(jnp.asarray(INERTIA, dt))
 
     def solve(omega, tol, norm):
-        quat = jnp.zeros(omega.shape[:-1] + (4,), dt).at[..., 0].set(1.0)
-        kwargs = {} if norm is None else {"norm": norm}
-        sol = dfx.diffeqsolve(
-            dfx.ODETerm(rhs),
-            solver,
-            ts[0],
-            ts[-1],
-            None,
-            (quat, omega),
-            saveat=dfx.SaveAt(t1=True),
-            stepsize_controller=dfx.PIDController(rtol=tol, atol=tol, **kwargs),
-            max_steps=100_000,
-            throw=False,
-        )
-        return sol.ys[1][-1], sol.ys[0][-1], sol.stats["num_accepted_steps"]
+        return plain_solve(solver, omega, ts, tol, norm)
 
     rows = []
     for label, fn in (

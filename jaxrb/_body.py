@@ -4,17 +4,10 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from . import inertia as _inertia
+from . import _host, inertia as _inertia
 from ._checks import as_computed, is_concrete
 from ._shapes import AbstractShape
 from ._typing import Mat3
-
-
-@eqx.filter_jit
-def _shape_inertia(shape: AbstractShape, mass) -> Mat3:
-    """`shape`'s uniform-solid inertia (kg m^2) as one compiled program: made eagerly, its
-    dozen array operations would each compile (or load from the cache) on their own."""
-    return shape.inertia(mass)
 
 
 class RigidBody(eqx.Module):
@@ -47,7 +40,7 @@ class RigidBody(eqx.Module):
         if inertia is None:
             if shape is None:
                 raise ValueError("RigidBody needs `inertia` or a `shape` to compute it from")
-            inertia = _shape_inertia(shape, self.mass)
+            inertia = _host.shape_inertia(shape, self.mass)  # one program
         inertia = jnp.asarray(inertia) if not hasattr(inertia, "dtype") else inertia
         if not jnp.issubdtype(inertia.dtype, jnp.floating):
             inertia = inertia.astype(float)

@@ -2,14 +2,10 @@
 normal."""
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 
+from . import _host
 from ._checks import Requirement, as_float_array, finite, finite_nonnegative, raise_unmet
-from ._quaternion import unit_vector
-
-# one compiled program for a floor made eagerly (the normal of every Floor)
-_unit_vector = jax.jit(unit_vector)
 
 
 def set_contact_coefficients(surface, restitution, friction, rolling, spin):
@@ -76,7 +72,7 @@ class Floor(eqx.Module):
         set_contact_coefficients(self, restitution, friction, rolling_resistance, spin_resistance)
         self.height = jnp.asarray(height, dtype=float)
         normal = as_float_array(normal, "normal", (3,))
-        unit = _unit_vector(normal)  # NaN for a zero normal: flagged by `requirements`
+        unit = _host.unit_vector(normal)  # NaN for a zero normal: flagged by `requirements`
         raise_unmet(
             "Floor", (Requirement("normal", normal, "a finite non-zero direction", finite(unit)),)
         )

@@ -1,5 +1,5 @@
-"""Jitted forms of library functions for host-side code: a scene file's checks, the command
-line's summary, the plots and the saved files.
+"""Jitted forms of library functions for host-side code: the models' constructors, a scene
+file's checks, the command line's summary, the plots and the saved files.
 
 Called eagerly, a function of a dozen array operations makes a dozen small programs, each
 lowered and compiled (or read back from the persistent cache) on its own: about 9 ms apiece
@@ -8,9 +8,22 @@ code calls the plain functions.
 """
 
 import equinox as eqx
+import jax
 
+from . import _euler, _quaternion
 from ._invariants import energy as _energy
 from ._quaternion import quat_normalize, quat_rotate
+
+# a Floor's normal, a scene file's attitude (angles in rad; the sequence is static)
+unit_vector = jax.jit(_quaternion.unit_vector)
+axis_angle_to_quat = jax.jit(_quaternion.axis_angle_to_quat)
+euler_to_quat = jax.jit(_euler.euler_to_quat, static_argnums=1)
+
+
+@eqx.filter_jit
+def shape_inertia(shape, mass):
+    """`shape`'s uniform-solid inertia (kg m^2) about its centre, for a body of `mass` (kg)."""
+    return shape.inertia(mass)
 
 
 @eqx.filter_jit

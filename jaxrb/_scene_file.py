@@ -412,29 +412,13 @@ def _body(root: _Table):
     return body.model(key, jaxrb.RigidBody, mass, inertia, shape=shape)
 
 
-def _euler_quat(angles_rad, sequence):
-    """`jaxrb.euler_to_quat` of the angles (rad) as one compiled program, in numpy."""
-    import jax
-
-    import jaxrb
-
-    return np.asarray(jax.jit(jaxrb.euler_to_quat, static_argnums=1)(angles_rad, sequence))
-
-
-def _axis_angle_quat(axis, angle_rad):
-    """`jaxrb.axis_angle_to_quat` as one compiled program, in numpy."""
-    import jax
-
-    import jaxrb
-
-    return np.asarray(jax.jit(jaxrb.axis_angle_to_quat)(axis, angle_rad))
-
-
 _SEQUENCES = ("121", "123", "131", "132", "212", "213", "231", "232", "312", "313", "321", "323")
 
 
 def _initial(root: _Table):
     import jaxrb
+
+    from . import _host as host
 
     init = root.table(
         "initial",
@@ -456,10 +440,10 @@ def _initial(root: _Table):
         if axis is None:
             init.fail("axis", "must not be the zero vector")
         angle = math.radians(init.number("angle_deg"))
-        quat = _axis_angle_quat(axis, angle)
+        quat = np.asarray(host.axis_angle_to_quat(axis, angle))
     elif init.has("euler_deg"):
         angles = np.radians(init.vector("euler_deg"))
-        quat = _euler_quat(angles, init.string("sequence", choices=_SEQUENCES))
+        quat = np.asarray(host.euler_to_quat(angles, init.string("sequence", choices=_SEQUENCES)))
     else:
         for k in ("angle_deg", "sequence"):
             if init.has(k):
