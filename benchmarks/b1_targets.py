@@ -37,7 +37,6 @@ import diffrax as dfx  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
 import jaxrb  # noqa: E402
-from jaxrb._batched import batch_rms_norm  # noqa: E402
 
 try:
     from . import _common as C, b1_torque_free as B1
@@ -79,7 +78,9 @@ def methods(n):
         """The hand-written rhs: vmapped (each body its own solve), or with `batch` one solve
         of all bodies whose controller takes the worst body's RMS norm (no jaxrb around it)."""
         if batch:
-            fn = jax.jit(lambda w, tol: B1.plain_solve(solver, w, ts, tol, batch_rms_norm))
+            fn = jax.jit(
+                lambda w, tol: B1.plain_solve(solver, w, ts, tol, B1.members_first_rms_norm)
+            )
         else:
             one = lambda w, tol: B1.plain_solve(solver, w, ts, tol)  # noqa: E731
             fn = jax.jit(jax.vmap(one, in_axes=(0, None)))

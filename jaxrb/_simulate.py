@@ -118,7 +118,8 @@ def simulate(
     right-hand side is mapped over the members and one step-size controller serves them all,
     accepting a step when the worst member's error norm is <= 1 (the default controller is a
     `PIDController` whose `norm` is the largest of the members' RMS norms; a `PIDController`
-    you pass with diffrax's default norm gets that norm too). All members take the same
+    you pass with diffrax's default norm gets that norm too; a norm of your own sees the
+    coordinates with the member axis last, e.g. quat (4, N)). All members take the same
     steps, so batch members of similar time scales together. Every array that
     `jax.vmap(simulate)` would return per member has a leading axis N: the states' leaves are
     (N, T, ...), `result`, `quat_norm_drift` and `num_steps` (N,) (`num_steps` is the shared

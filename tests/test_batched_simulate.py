@@ -10,6 +10,7 @@ import pytest
 import jaxrb
 from jaxrb import analytic
 from jaxrb._batched import batch_rms_norm
+from jaxrb._coordinates import ROTATION, coordinates_for
 from jaxrb._simulate import batch_controller
 from jaxrb._solve import default_solver
 
@@ -121,6 +122,22 @@ def test_bad_members_flagged_and_the_others_unaffected(states, gravity_run):
             getattr(traj.states, name)[good], getattr(gravity_run.states, name)[good], atol=1e-13
         )
         assert bool(jnp.all(jnp.isnan(getattr(traj.states, name)[np.array([2, 4])])))
+
+
+@pytest.mark.parametrize(
+    "inertia", [I123, jnp.array([[2.0, 0.3, -0.2], [0.3, 3.0, 0.1], [-0.2, 0.1, 4.0]])]
+)
+def test_member_last_rates_equal_the_mapped_one_body_rates(states, inertia):
+    """The free rotation's row-wise batch right-hand side (member axis last) is the one-body
+    `rates` mapped over the members, for principal moments and a full tensor."""
+    scene = jaxrb.Scene(jaxrb.RigidBody(2.0, inertia), forces=(jaxrb.Gravity(),))
+    coords = coordinates_for(scene)
+    assert coords is ROTATION
+    y = (states.quat, states.omega)
+    mapped = jax.vmap(lambda y1: coords.rates(scene, 0.0, y1, None))(y)
+    rows = coords.member_last_rates(scene, (states.quat.T, states.omega.T))
+    for got, want in zip(rows, mapped, strict=True):
+        np.testing.assert_allclose(got.T, want, rtol=1e-14, atol=1e-14)
 
 
 @pytest.mark.parametrize("inertia", [[jnp.nan, 2.0, 3.0], jnp.diag(jnp.array([1.0, jnp.nan, 3.0]))])
@@ -267,7 +284,8 @@ def test_default_solver_by_tolerance():
 
 
 def test_batch_norm_is_the_worst_members_rms():
-    tree = (jnp.array([[3.0, 4.0], [0.0, 0.0]]), jnp.array([[0.0], [6.0]]))
+    # the member axis last: member 0 is (3, 4, 0), member 1 is (0, 0, 6)
+    tree = (jnp.array([[3.0, 0.0], [4.0, 0.0]]), jnp.array([[0.0, 6.0]]))
     # member 0: sqrt((9 + 16 + 0) / 3); member 1: sqrt(36 / 3)
     np.testing.assert_allclose(batch_rms_norm(tree), jnp.sqrt(12.0))
     default_norm = batch_controller(dfx.PIDController(rtol=1e-6, atol=1e-6))
