@@ -123,13 +123,17 @@ def simulate(
     steps, so batch members of similar time scales together. Every array that
     `jax.vmap(simulate)` would return per member has a leading axis N: the states' leaves are
     (N, T, ...), `result`, `quat_norm_drift` and `num_steps` (N,) (`num_steps` is the shared
-    count); `ts` is returned once, shape (T,). A member with bad input is flagged in `result`
-    (with `throw=False`), takes no part in the step control and has NaN states; the others are
-    computed. The solve is differentiable like a single body's (reverse mode by default,
-    forward mode with `adjoint=diffrax.ForwardMode()`). `jax.vmap(simulate)` still works and
-    gives each member its own step-size control. A scene with a floor runs the contact
-    engine per member (`jax.vmap` over the batch). To split a batch over several devices,
-    or to give each member its own scene parameters, use `jaxrb.simulate_batch`.
+    count); `ts` is returned once, shape (T,). On a CPU a batch of more than 1024 members
+    runs as consecutive solves of 1024 (the last padded), each with its own step control,
+    so that each solve's buffers stay in a core's cache: `num_steps` is then the count of
+    the member's part (`jaxrb.simulate_batch` takes another `part_size`). A member with bad
+    input is flagged in `result` (with `throw=False`), takes no part in the step control and
+    has NaN states; the others are computed. The solve is differentiable like a single
+    body's (reverse mode by default, forward mode with `adjoint=diffrax.ForwardMode()`).
+    `jax.vmap(simulate)` still works and gives each member its own step-size control. A
+    scene with a floor runs the contact engine per member (`jax.vmap` over the batch). To
+    split a batch over several devices, or to give each member its own scene parameters, use
+    `jaxrb.simulate_batch`.
 
     Quaternion-norm policy: the right-hand side normalises q before rotating vectors, the
     kinematics preserve |q| up to the solver's error, and saved quaternions are normalised;

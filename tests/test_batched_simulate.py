@@ -9,7 +9,7 @@ import pytest
 
 import jaxrb
 from jaxrb import analytic
-from jaxrb._batched import batch_rms_norm
+from jaxrb._batched import CPU_PART, batch_rms_norm, default_part_size
 from jaxrb._coordinates import ROTATION, coordinates_for
 from jaxrb._simulate import batch_controller
 from jaxrb._solve import default_solver
@@ -78,6 +78,20 @@ def test_batch_equals_vmap_to_the_tolerance(states, gravity_run):
         )
     # the batch takes the steps of its hardest member
     assert int(gravity_run.num_steps[0]) >= int(jnp.max(per_member.num_steps))
+
+
+def test_a_batch_larger_than_a_cpu_part_runs_in_parts():
+    """On a CPU, `simulate` runs CPU_PART members per solve: with one member more, the last
+    one is a part of its own (padded), and every member matches the exact solution."""
+    assert jax.default_backend() == "cpu" and default_part_size(CPU_PART + 1) == CPU_PART
+    big = random_states(CPU_PART + 1, seed=3)
+    ts = jnp.array([0.0, 0.5])
+    traj = jaxrb.simulate(GRAVITY, big, ts, **TOL)
+    assert traj.states.omega.shape == (CPU_PART + 1, 2, 3)
+    w_exact = jax.vmap(lambda w: analytic.asymmetric_top(ts, I123, w))(big.omega)
+    assert float(jnp.max(jnp.abs(traj.states.omega - w_exact))) < 1e-9
+    steps = np.asarray(traj.num_steps)
+    assert len(set(steps[:CPU_PART])) == 1
 
 
 def test_full_state_with_linear_drag_matches_closed_form(states):
