@@ -8,7 +8,8 @@ coordinate a contiguous row of N numbers), the one-body right-hand side is mappe
 (`jax.vmap`, or written row-wise for a free body's rotation), and a single
 `diffrax.diffeqsolve` integrates it: its fixed cost per step is shared by the whole batch.
 One step-size controller serves all members: a step is accepted when the worst member's
-error norm (`batch_rms_norm`) is <= 1.
+error norm (`batch_rms_norm`) is <= 1. On a CPU a batch larger than `CPU_PART` runs as
+consecutive solves of that many members, whose buffers stay in a core's cache.
 
 `simulate` takes this path for a batched `State`; `simulate_batch` adds one set of scene
 parameters per member and splitting the batch over devices.
