@@ -84,8 +84,8 @@ def fit_contact(
     rtol: float = 1e-10,
     atol: float = 1e-10,
     max_steps: int = 100,
-    sim_rtol: float = 1e-10,
-    sim_atol: float = 1e-10,
+    sim_rtol: float | None = None,
+    sim_atol: float | None = None,
     max_impacts: int = 16,
 ) -> FitResult:
     """Fit the floor's restitution (and friction) to a tracked trajectory with bounces.
@@ -104,7 +104,8 @@ def fit_contact(
     - `friction0`: initial guess (> 0) of the Coulomb coefficient, or None to keep the
       scene's friction fixed (parameterised as exp: every iterate is positive).
     - `rtol`, `atol`, `max_steps`: Levenberg–Marquardt settings; `sim_rtol`, `sim_atol`,
-      `max_impacts`: passed to `simulate`.
+      `max_impacts`: passed to `simulate`. Default `sim_rtol` and `sim_atol`: 1e-10 in
+      float64, 1e-6 in float32 (below its resolution a simulation can run out of steps).
 
     **Returns:** a `FitResult` with values `restitution` and `friction` (the fixed value when
     not fitted, with std 0). Friction is identifiable only if the contact slides at some
@@ -138,7 +139,7 @@ def fit_contact(
         scene=scene,
         state0=state0,
         fit_friction=friction0 is not None,
-        sim_tol=check_tolerances(sim_rtol, sim_atol),
+        sim_tol=check_tolerances(sim_rtol, sim_atol, default=1e-10),
         sim_kwargs=tuple(sim_kwargs.items()),
     )
     return least_squares_fit(

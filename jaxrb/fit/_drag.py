@@ -84,8 +84,8 @@ def fit_drag(
     rtol: float = 1e-10,
     atol: float = 1e-10,
     max_steps: int = 100,
-    sim_rtol: float = 1e-11,
-    sim_atol: float = 1e-11,
+    sim_rtol: float | None = None,
+    sim_atol: float | None = None,
     solver=None,
     stepsize_controller=None,
     dt0=None,
@@ -111,7 +111,8 @@ def fit_drag(
     - `fit_initial`: also fit the initial position and velocity (nuisance parameters).
     - `g`: gravity (m/s^2, world frame).
     - `rtol`, `atol`, `max_steps`: Levenberg–Marquardt settings; `sim_rtol`, `sim_atol`,
-      `solver`, `stepsize_controller`, `dt0`: passed to `simulate`.
+      `solver`, `stepsize_controller`, `dt0`: passed to `simulate`. Default `sim_rtol` and
+      `sim_atol`: 1e-11 in float64, 1e-6 in float32.
 
     **Returns:** a `FitResult` with values `drag` (scalar), `pos0` (3,), `vel0` (3,).
     """
@@ -153,7 +154,7 @@ def fit_drag(
         vel_ref=jnp.asarray(vel0),
         model=model,
         fit_initial=bool(fit_initial),
-        sim_tol=check_tolerances(sim_rtol, sim_atol),
+        sim_tol=check_tolerances(sim_rtol, sim_atol, default=1e-11),
         sim_kwargs=tuple(sim_kwargs.items()),
     )
     return least_squares_fit(

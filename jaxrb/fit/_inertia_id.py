@@ -113,8 +113,8 @@ def fit_inertia(
     rtol: float = 1e-10,
     atol: float = 1e-10,
     max_steps: int = 100,
-    sim_rtol: float = 1e-11,
-    sim_atol: float = 1e-11,
+    sim_rtol: float | None = None,
+    sim_atol: float | None = None,
     sim_max_steps: int = 100_000,
     solver=None,
     stepsize_controller=None,
@@ -149,7 +149,8 @@ def fit_inertia(
       residual kinds; the overall sigma^2 is estimated from the residuals.
     - `rtol`, `atol`, `max_steps`: Levenberg–Marquardt settings.
     - `sim_rtol`, `sim_atol`, `sim_max_steps`, `solver`, `stepsize_controller`, `dt0`: passed
-      to `simulate` (e.g. a fixed-step solver for speed).
+      to `simulate` (e.g. a fixed-step solver for speed). Default `sim_rtol` and
+      `sim_atol`: 1e-11 in float64, 1e-6 in float32.
 
     **Returns:** a `FitResult` with values `inertia` (3, 3), `omega0` (3,), `quat0` (4,).
     Residuals: omega (rad/s) then the attitude error rotation vector (rad), each divided by
@@ -217,7 +218,7 @@ def fit_inertia(
         fix_scale=bool(fix_scale),
         fit_omega0=bool(fit_initial),
         fit_quat0=bool(fit_quat0),
-        sim_tol=check_tolerances(sim_rtol, sim_atol),
+        sim_tol=check_tolerances(sim_rtol, sim_atol, default=1e-11),
         sim_kwargs=tuple(
             dict(
                 max_steps=sim_max_steps,

@@ -165,7 +165,9 @@ def _solve(fn, to_physical, z0, rtol, atol, max_steps):
     eps = jnp.finfo(dtype).eps
     r_struct = jax.eval_shape(lambda z: fn(z, None), z0)
     n, p = r_struct.shape[0], z0.shape[0]
-    rtol, atol = jnp.asarray(rtol, dtype), jnp.asarray(atol, dtype)
+    # a relative tolerance finer than the working precision could never be met
+    rtol = jnp.maximum(jnp.asarray(rtol, dtype), RESOLUTION_EPS * eps)
+    atol = jnp.asarray(atol, dtype)
     one, zero = jnp.ones((), dtype), jnp.zeros((), dtype)
 
     def evaluate(z):
@@ -295,7 +297,11 @@ def least_squares_fit(
     - `to_physical`: `z -> tuple of arrays`, the physical values named `names`.
     - `internal_names`: a label per entry of `z` (for identifiability warnings).
     - `rtol`, `atol`: convergence tolerances (module docstring): the Gauss–Newton step
-      `|h| <= atol + rtol |z|`, or the relative first-order cost reduction `<= rtol`.
+      `|h| <= atol + rtol |z|`, or the relative first-order cost reduction `<= rtol`. An
+      `rtol` below `RESOLUTION_EPS` machine epsilons of the working precision (float32,
+      JAX's default: 1.2e-5; float64: 2.2e-14) is raised to that: a step test much finer
+      than the numbers cannot pass, and the fit would stop unconverged at a solution it has
+      found (in float32, an inertia fit's steps stalled between 1e-6 and 1e-5 of |z|).
     - `max_steps`: budget of trial steps (each evaluates `fn` and its Jacobian once).
     - `cond_warn`: condition-number threshold of the identifiability warning.
     - `notes`: facts to attach to `FitResult.warnings` without emitting them (e.g. that the
@@ -383,15 +389,29 @@ def least_squares_fit(
     )
 
 
+RESOLUTION_EPS = 100
+"""The least-squares `rtol` is at least this many machine epsilons of the working
+precision: a relative step test much finer than the numbers cannot be met."""
+
+FLOAT32_SIM_TOL = 1e-6
+"""The fits' default `sim_rtol` and `sim_atol` in float32: their float64 defaults (1e-10,
+1e-11) are below float32's resolution (1.2e-7), where a simulation with a floor can run out
+of steps and a fit then stops at its initial guess."""
+
+
 def nan_unless_solved(traj, residuals):
     """`residuals` where the simulation `traj` succeeded, NaN where it failed (the driver
     then rejects the trial point)."""
     return jnp.where(traj.result == RESULTS.successful, residuals, jnp.nan)
 
 
-def check_tolerances(rtol, atol) -> jax.Array:
+def check_tolerances(rtol, atol, default: float) -> jax.Array:
     """`(rtol, atol)` of a model's adaptive integrator, checked (finite, >= 0, not both 0), as
-    one array: new values reuse the compiled fit."""
+    one array: new values reuse the compiled fit. None stands for `default` in float64 and
+    for `FLOAT32_SIM_TOL` when JAX computes in float32 (its default, without x64)."""
+    in_float32 = jnp.result_type(float) == jnp.float32
+    rtol = (FLOAT32_SIM_TOL if in_float32 else default) if rtol is None else rtol
+    atol = (FLOAT32_SIM_TOL if in_float32 else default) if atol is None else atol
     for name, tol in (("sim_rtol", rtol), ("sim_atol", atol)):
         if not (np.isfinite(tol) and tol >= 0):
             raise ValueError(f"{name} must be a finite number >= 0, got {tol}")
