@@ -120,3 +120,16 @@ def test_bad_input():
         jf.fit_inertia(
             TS, inertia0=J_START, quat=np.tile([2.0, 0, 0, 0], (TS.size, 1)), omega0=OMEGA0
         )
+
+
+def test_a_fit_that_cannot_start_says_why():
+    """A simulation that fails at the initial guess (here: out of steps) is named in the
+    fit's message and warning, not only "the model cannot be evaluated"."""
+    omega, _ = _observe()
+    with pytest.warns(jf.ConvergenceWarning, match="maximum number of solver steps"):
+        res = jf.fit_inertia(TS, inertia0=J_START, omega=omega, sim_max_steps=2)
+    assert not res.converged and res.reason == "invalid_start"
+    assert "cannot be evaluated at the initial guess" in res.message
+    assert "the simulation at the initial guess: The maximum number of solver steps" in (
+        res.message
+    )

@@ -20,6 +20,7 @@ from ._least_squares import (
     check_series,
     check_times,
     check_tolerances,
+    failure_message,
     least_squares_fit,
     nan_unless_solved,
     require_samples,
@@ -48,12 +49,12 @@ class _ContactResiduals(eqx.Module):
         mu = unconstrained_to_positive(z[1]) if self.fit_friction else self.scene.floor.friction
         return e, mu
 
-    def __call__(self, z, args):
+    def simulation(self, z):
         e, mu = self.physical(z)
         old = self.scene.floor
         floor = Floor(e, mu, old.height, old.normal, old.rolling_resistance, old.spin_resistance)
         scene = Scene(self.scene.body, self.scene.forces, floor=floor)
-        traj = simulate(
+        return simulate(
             scene,
             self.state0,
             self.ts,
@@ -63,6 +64,12 @@ class _ContactResiduals(eqx.Module):
             throw=False,
             **dict(self.sim_kwargs),
         )
+
+    def failure(self, z):
+        return failure_message(self.simulation(jnp.asarray(z)))
+
+    def __call__(self, z, args):
+        traj = self.simulation(z)
         res = jnp.ravel(traj.states.pos - self.pos_data)
         if self.omega_data is not None:
             res = jnp.concatenate(

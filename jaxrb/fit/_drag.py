@@ -15,6 +15,7 @@ from ._least_squares import (
     check_series,
     check_times,
     check_tolerances,
+    failure_message,
     least_squares_fit,
     nan_unless_solved,
     require_samples,
@@ -44,13 +45,13 @@ class _DragResiduals(eqx.Module):
             return coefficient, self.pos_ref + z[1:4], self.vel_ref + z[4:7]
         return coefficient, self.pos_ref, self.vel_ref
 
-    def __call__(self, z, args):
+    def simulation(self, z):
         coefficient, pos0, vel0 = self.physical(z)
         body = RigidBody(self.mass, jnp.ones(3, dtype=z.dtype))
         scene = Scene(body, forces=(Gravity(self.g), _MODELS[self.model](coefficient)))
         quat = jnp.array([1.0, 0.0, 0.0, 0.0], dtype=z.dtype)
         state0 = State(pos0, quat, vel0, jnp.zeros(3, dtype=z.dtype))
-        traj = simulate(
+        return simulate(
             scene,
             state0,
             self.ts,
@@ -60,6 +61,12 @@ class _DragResiduals(eqx.Module):
             throw=False,
             **dict(self.sim_kwargs),
         )
+
+    def failure(self, z):
+        return failure_message(self.simulation(jnp.asarray(z)))
+
+    def __call__(self, z, args):
+        traj = self.simulation(z)
         res = jnp.ravel(traj.states.pos - self.pos_data)
         if self.vel_data is not None:
             res = jnp.concatenate(

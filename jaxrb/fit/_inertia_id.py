@@ -19,6 +19,7 @@ from ._least_squares import (
     check_series,
     check_times,
     check_tolerances,
+    failure_message,
     least_squares_fit,
     nan_unless_solved,
     require_samples,
@@ -72,12 +73,12 @@ class _InertiaResiduals(eqx.Module):
     def physical(self, z):
         return self.split(z)
 
-    def __call__(self, z, args):
+    def simulation(self, z):
         inertia, omega0, quat0 = self.split(z)
         scene = Scene(RigidBody(self.mass, inertia), forces=self.forces)
         zero = jnp.zeros(3, dtype=z.dtype)
         state0 = State(zero, quat0, zero, omega0)
-        traj = simulate(
+        return simulate(
             scene,
             state0,
             self.ts,
@@ -87,6 +88,12 @@ class _InertiaResiduals(eqx.Module):
             throw=False,
             **dict(self.sim_kwargs),
         )
+
+    def failure(self, z):
+        return failure_message(self.simulation(jnp.asarray(z)))
+
+    def __call__(self, z, args):
+        traj = self.simulation(z)
         parts = []
         if self.omega_data is not None:
             parts.append(jnp.ravel((traj.states.omega - self.omega_data) * self.omega_weight))

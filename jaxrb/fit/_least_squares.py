@@ -290,9 +290,11 @@ def least_squares_fit(
     **Arguments:**
 
     - `fn`: `fn(z, None) -> (n,)` residuals; pure and jittable; NaN where the model cannot be
-      evaluated (e.g. a failed simulation). An `eqx.Module` holding the data as array
-      fields is best: a new data set or start of the same shapes then reuses the compiled
-      solver.
+      evaluated (e.g. a failed simulation). If it has a method `failure(z) -> str | None`,
+      a fit that cannot start asks it why (the fits through `simulate` give the
+      simulation's result there, e.g. "The maximum number of solver steps was reached").
+      An `eqx.Module` holding the data as array fields is best: a new data set or start of
+      the same shapes then reuses the compiled solver.
     - `z0`: (p,) initial internal parameters.
     - `to_physical`: `z -> tuple of arrays`, the physical values named `names`.
     - `internal_names`: a label per entry of `z` (for identifiability warnings).
@@ -325,6 +327,12 @@ def least_squares_fit(
     r, jac, grad_phys = np.asarray(state.r), np.asarray(state.jac), np.asarray(grad_phys)
     values_flat = [np.asarray(v) for v in values_flat]
     reason = _CODES[int(state.reason) - 1]
+    message = REASONS[reason]
+    failure = getattr(fn, "failure", None)
+    if reason == "invalid_start" and failure is not None:
+        cause = failure(z0)
+        if cause:
+            message = f"{message}; the simulation at the initial guess: {cause}"
     converged = reason in ("small_step", "stationary")
     if reason == "invalid_start":  # nothing was accepted: no residuals to show
         r, jac = np.full_like(r, np.nan), np.full_like(jac, np.nan)
@@ -333,7 +341,7 @@ def least_squares_fit(
 
     found = list(notes)
     if not converged:
-        found.append(f"least squares did not converge: {REASONS[reason]}")
+        found.append(f"least squares did not converge: {message}")
         warnings.warn(found[-1], ConvergenceWarning, stacklevel=3)
 
     # finiteness first: SVD cannot take NaN (only an invalid start leaves them)
@@ -381,7 +389,7 @@ def least_squares_fit(
         condition_number=cond,
         converged=converged,
         num_steps=int(state.num_steps),
-        message=REASONS[reason],
+        message=message,
         warnings=tuple(found),
         reason=reason,
         num_rejected=int(state.num_rejected),
@@ -397,6 +405,13 @@ FLOAT32_SIM_TOL = 1e-6
 """The fits' default `sim_rtol` and `sim_atol` in float32: their float64 defaults (1e-10,
 1e-11) are below float32's resolution (1.2e-7), where a simulation with a floor can run out
 of steps and a fit then stops at its initial guess."""
+
+
+def failure_message(traj) -> str | None:
+    """The message of the simulation `traj`'s result code (one run, concrete), or None
+    where it succeeded."""
+    code = int(np.asarray(traj.result._value))
+    return None if code == RESULTS.successful._value else RESULTS._index_to_message[code]
 
 
 def nan_unless_solved(traj, residuals):
