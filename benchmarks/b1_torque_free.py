@@ -31,7 +31,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxrb  # noqa: E402
-from jaxrb._batched import simulate_batch  # noqa: E402
+from jaxrb._batched import batch_rms_norm, simulate_batch  # noqa: E402
 from jaxrb.analytic import asymmetric_top  # noqa: E402
 
 try:
@@ -424,10 +424,7 @@ def plain_rhs(inertia):
 def members_first_rms_norm(tree):
     """The worst body's RMS norm for leaves with the body axis first, (N, ...): the plain
     batched solve's norm (jaxrb's own solve keeps the body axis last)."""
-    leaves = [jax.lax.stop_gradient(x) for x in jax.tree.leaves(tree)]
-    squares = sum(jnp.sum(jnp.reshape(x * x, (x.shape[0], -1)), axis=1) for x in leaves)
-    size = sum(int(np.prod(x.shape[1:])) for x in leaves)
-    return jnp.max(jnp.sqrt(squares / size))
+    return batch_rms_norm(tree, member_axis=0)
 
 
 def plain_solve(solver, omega, ts, tol, norm=None):

@@ -34,12 +34,14 @@ from ._state import State
 from ._trajectory import Trajectory
 
 
-def batch_rms_norm(tree) -> jax.Array:
-    """The worst member's RMS norm: every leaf has the member axis last, (..., N), as the
-    batch's coordinates in the solve; the RMS is taken over each member's entries of all
-    leaves, then the largest over the members. Step-size control only (no gradient flows
+def batch_rms_norm(tree, member_axis: int = -1) -> jax.Array:
+    """The worst member's RMS norm: every leaf has the member axis at `member_axis` (last, as
+    the batch's coordinates in the solve); the RMS is taken over each member's entries of
+    all leaves, then the largest over the members. Step-size control only (no gradient flows
     through it)."""
-    leaves = [jax.lax.stop_gradient(x) for x in jax.tree.leaves(tree)]
+    leaves = [
+        jnp.moveaxis(jax.lax.stop_gradient(x), member_axis, -1) for x in jax.tree.leaves(tree)
+    ]
     squares = sum(jnp.sum(jnp.reshape(x * x, (-1, x.shape[-1])), axis=0) for x in leaves)
     size = sum(math.prod(x.shape[:-1]) for x in leaves)
     return jnp.max(jnp.sqrt(squares / size))
@@ -67,6 +69,24 @@ def _where_members(valid, tree, other):
     """Per member (leading axis N): `tree` where `valid`, else `other` (broadcast)."""
     return jax.tree.map(
         lambda x, o: jnp.where(valid.reshape((-1,) + (1,) * (x.ndim - 1)), x, o), tree, other
+    )
+
+
+def _padded(x, total):
+    """(N, ...) -> (total, ...): the last member repeated to fill."""
+    pad = total - x.shape[0]
+    return jnp.concatenate([x, jnp.repeat(x[-1:], pad, axis=0)]) if pad else x
+
+
+def _per_member(traj, fn, ts):
+    """`traj` with `fn` applied to each per-member leaf (leading axis: the members) and `ts`
+    as its save times."""
+    return Trajectory(
+        ts=ts,
+        states=jax.tree.map(fn, traj.states),
+        result=jax.tree.map(fn, traj.result),
+        quat_norm_drift=fn(traj.quat_norm_drift),
+        num_steps=fn(traj.num_steps),
     )
 
 
@@ -108,9 +128,7 @@ def simulate_batched(scene, states0, ts, settings, batched_scene=False, part=Non
     parts = -(-n // part)
 
     def split(x):  # (N, ...) -> (parts, part, ...), the last member repeated as padding
-        pad = parts * part - n
-        x = jnp.concatenate([x, jnp.repeat(x[-1:], pad, axis=0)]) if pad else x
-        return x.reshape((parts, part) + x.shape[1:])
+        return _padded(x, parts * part).reshape((parts, part) + x.shape[1:])
 
     scene_arrays, scene_rest = eqx.partition(scene, eqx.is_array)
     scene_parts = jax.tree.map(split, scene_arrays) if batched_scene else None
@@ -125,13 +143,7 @@ def simulate_batched(scene, states0, ts, settings, batched_scene=False, part=Non
     def merge(x):  # (parts, part, ...) -> (N, ...)
         return x.reshape((parts * part,) + x.shape[2:])[:n]
 
-    return Trajectory(
-        ts=traj.ts[0],
-        states=jax.tree.map(merge, traj.states),
-        result=jax.tree.map(merge, traj.result),
-        quat_norm_drift=merge(traj.quat_norm_drift),
-        num_steps=merge(traj.num_steps),
-    )
+    return _per_member(traj, merge, traj.ts[0])
 
 
 def _solve_part(scene, states0, ts, settings, batched_scene):
@@ -330,10 +342,10 @@ def _default_devices(scene, n_bodies):
 def _sharded(run, scene, states0, args, batched_scene, devices):
     """`run` on equal parts of the batch, one per device, with `jax.shard_map`."""
     n = states0.pos.shape[0]
-    pad = (-n) % len(devices)
+    total = n + (-n) % len(devices)
 
     def padded(x):  # repeat the last body to fill the last part
-        return jnp.concatenate([x, jnp.repeat(x[-1:], pad, axis=0)]) if pad else x
+        return _padded(x, total)
 
     mesh = jax.sharding.Mesh(np.array(devices), ("batch",))
     part, whole = jax.sharding.PartitionSpec("batch"), jax.sharding.PartitionSpec()
@@ -352,12 +364,6 @@ def _sharded(run, scene, states0, args, batched_scene, devices):
         out_specs=out_specs,
         check_vma=False,  # ts comes back identical from every part
     )(jax.tree.map(padded, states0), scene_arrays, *args)
-    if pad:
-        traj = Trajectory(
-            ts=traj.ts,
-            states=jax.tree.map(lambda x: x[:n], traj.states),
-            result=jax.tree.map(lambda x: x[:n], traj.result),
-            quat_norm_drift=traj.quat_norm_drift[:n],
-            num_steps=traj.num_steps[:n],
-        )
+    if total > n:
+        traj = _per_member(traj, lambda x: x[:n], traj.ts)
     return traj

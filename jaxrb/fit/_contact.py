@@ -20,7 +20,6 @@ from ._least_squares import (
     check_series,
     check_times,
     check_tolerances,
-    failure_message,
     least_squares_fit,
     nan_unless_solved,
     require_samples,
@@ -64,9 +63,6 @@ class _ContactResiduals(eqx.Module):
             throw=False,
             **dict(self.sim_kwargs),
         )
-
-    def failure(self, z):
-        return failure_message(self.simulation(jnp.asarray(z)))
 
     def __call__(self, z, args):
         traj = self.simulation(z)

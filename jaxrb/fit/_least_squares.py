@@ -44,6 +44,15 @@ DEFAULT_COND_WARN = 1e8
 _ACCEPT = 1e-4  # least ratio of actual to predicted cost reduction of an accepted step
 _MU0 = 1e-3  # initial damping, relative to the squared column scales
 
+RESOLUTION_EPS = 100
+"""The least-squares `rtol` is at least this many machine epsilons of the working
+precision: a relative step test much finer than the numbers cannot be met."""
+
+FLOAT32_SIM_TOL = 1e-6
+"""The fits' default `sim_rtol` and `sim_atol` in float32: their float64 defaults (1e-10,
+1e-11) are below float32's resolution (1.2e-7), where a simulation with a floor can run out
+of steps and a fit then stops at its initial guess."""
+
 REASONS = {
     "small_step": "the Gauss-Newton step fell below atol + rtol |z|",
     "stationary": "no step can reduce the cost by more than rtol of itself",
@@ -290,9 +299,10 @@ def least_squares_fit(
     **Arguments:**
 
     - `fn`: `fn(z, None) -> (n,)` residuals; pure and jittable; NaN where the model cannot be
-      evaluated (e.g. a failed simulation). If it has a method `failure(z) -> str | None`,
-      a fit that cannot start asks it why (the fits through `simulate` give the
-      simulation's result there, e.g. "The maximum number of solver steps was reached").
+      evaluated (e.g. a failed simulation). If it has a method `simulation(z)` returning
+      the model's `Trajectory` (as the fits through `simulate` do), a fit that cannot start
+      names that simulation's result (e.g. "The maximum number of solver steps was
+      reached").
       An `eqx.Module` holding the data as array fields is best: a new data set or start of
       the same shapes then reuses the compiled solver.
     - `z0`: (p,) initial internal parameters.
@@ -328,9 +338,9 @@ def least_squares_fit(
     values_flat = [np.asarray(v) for v in values_flat]
     reason = _CODES[int(state.reason) - 1]
     message = REASONS[reason]
-    failure = getattr(fn, "failure", None)
-    if reason == "invalid_start" and failure is not None:
-        cause = failure(z0)
+    simulation = getattr(fn, "simulation", None)
+    if reason == "invalid_start" and simulation is not None:
+        cause = failure_message(simulation(z0))
         if cause:
             message = f"{message}; the simulation at the initial guess: {cause}"
     converged = reason in ("small_step", "stationary")
@@ -397,16 +407,6 @@ def least_squares_fit(
     )
 
 
-RESOLUTION_EPS = 100
-"""The least-squares `rtol` is at least this many machine epsilons of the working
-precision: a relative step test much finer than the numbers cannot be met."""
-
-FLOAT32_SIM_TOL = 1e-6
-"""The fits' default `sim_rtol` and `sim_atol` in float32: their float64 defaults (1e-10,
-1e-11) are below float32's resolution (1.2e-7), where a simulation with a floor can run out
-of steps and a fit then stops at its initial guess."""
-
-
 def failure_message(traj) -> str | None:
     """The message of the simulation `traj`'s result code (one run, concrete), or None
     where it succeeded."""
@@ -424,9 +424,9 @@ def check_tolerances(rtol, atol, default: float) -> jax.Array:
     """`(rtol, atol)` of a model's adaptive integrator, checked (finite, >= 0, not both 0), as
     one array: new values reuse the compiled fit. None stands for `default` in float64 and
     for `FLOAT32_SIM_TOL` when JAX computes in float32 (its default, without x64)."""
-    in_float32 = jnp.result_type(float) == jnp.float32
-    rtol = (FLOAT32_SIM_TOL if in_float32 else default) if rtol is None else rtol
-    atol = (FLOAT32_SIM_TOL if in_float32 else default) if atol is None else atol
+    unset = FLOAT32_SIM_TOL if jnp.result_type(float) == jnp.float32 else default
+    rtol = unset if rtol is None else rtol
+    atol = unset if atol is None else atol
     for name, tol in (("sim_rtol", rtol), ("sim_atol", atol)):
         if not (np.isfinite(tol) and tol >= 0):
             raise ValueError(f"{name} must be a finite number >= 0, got {tol}")
