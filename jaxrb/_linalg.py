@@ -25,44 +25,58 @@ def solve(A, b, unroll: bool = False):
     """x with A x = b, for a small square `A` (n, n) and `b` (n,) or (n, m): Gaussian
     elimination with partial pivoting, then back substitution.
 
-    The elimination is a loop over the n columns (one column's operations in the compiled
-    program instead of n: a die's contact program compiled in 12.2 s instead of 14.4 s on
-    a 2-core x86 CPU), or, with `unroll`, written out column by column. The impact law
-    unrolls: its normal equations are nearly singular (a face's four corners give 12 rows
-    of rank 6), and only the unrolled elimination gave the same impulses for every
-    numbering of the corners to roundoff (through the loop they differed by up to 1e-5,
-    relative, with XLA's legacy CPU emitters)."""
+    The elimination and the back substitution are loops over the n columns (one column's
+    operations in the compiled program instead of n: with the elimination's loop a die's
+    contact program compiled in 12.2 s instead of 14.4 s on a 2-core x86 CPU), or, with
+    `unroll`, written out column by column. The impact law unrolls: its normal equations
+    are nearly singular (a face's four corners give 12 rows of rank 6), and only the
+    unrolled elimination gave the same impulses for every numbering of the corners to
+    roundoff (through the loop they differed by up to 1e-5, relative, with XLA's legacy
+    CPU emitters)."""
     n = A.shape[-1]
     vector = b.ndim == 1
     B = b[:, None] if vector else b
     M = jnp.concatenate([A, B], axis=1)
     rows = jnp.arange(n)
+    x = jnp.zeros(B.shape, M.dtype)
     if unroll:
         for k in range(n):
             M = _eliminate(M, rows, k)
+        for k in reversed(range(n)):
+            x = x.at[k].set((M[k, n:] - M[k, :n] @ x) / M[k, k])
     else:
         M = jax.lax.fori_loop(0, n, lambda k, M: _eliminate(M, rows, k), M)
-    x = jnp.zeros(B.shape, M.dtype)
-    for k in reversed(range(n)):
-        x = x.at[k].set((M[k, n:] - M[k, :n] @ x) / M[k, k])
+
+        def substitute(j, x):  # row k = n - 1 - j; the entries of x above k are still 0
+            k = n - 1 - j
+            Mk = M[k]
+            return x.at[k].set((Mk[n:] - jnp.sum(Mk[:n, None] * x, axis=0)) / Mk[k])
+
+        x = jax.lax.fori_loop(0, n, substitute, x)
     return x[:, 0] if vector else x
 
 
 def inverse3(J):
-    """Inverse of 3 x 3 matrices (..., 3, 3) by cofactors."""
-    a, b, c = J[..., 0, 0], J[..., 0, 1], J[..., 0, 2]
-    d, e, f = J[..., 1, 0], J[..., 1, 1], J[..., 1, 2]
-    g, h, i = J[..., 2, 0], J[..., 2, 1], J[..., 2, 2]
-    cof = jnp.stack(
-        [
-            jnp.stack([e * i - f * h, c * h - b * i, b * f - c * e], -1),
-            jnp.stack([f * g - d * i, a * i - c * g, c * d - a * f], -1),
-            jnp.stack([d * h - e * g, b * g - a * h, a * e - b * d], -1),
-        ],
-        -2,
-    )
-    det = a * cof[..., 0, 0] + b * cof[..., 1, 0] + c * cof[..., 2, 0]
-    return cof / det[..., None, None]
+    """Inverse of 3 x 3 matrices (..., 3, 3) by cofactors: with rows r0, r1, r2 of J, the
+    columns of J^-1 are r1 x r2, r2 x r0, r0 x r1 over det J = r0 . (r1 x r2)."""
+    rows_next = jnp.concatenate([J[..., 1:, :], J[..., :1, :]], axis=-2)  # r1, r2, r0
+    rows_after = jnp.concatenate([J[..., 2:, :], J[..., :2, :]], axis=-2)  # r2, r0, r1
+    cof = cross(rows_next, rows_after)  # row i: r_{i+1} x r_{i+2}
+    det = jnp.sum(J[..., 0, :] * cof[..., 0, :], axis=-1)
+    return jnp.swapaxes(cof, -1, -2) / det[..., None, None]
+
+
+def cross(a, b):
+    """a x b over the last axis (..., 3; broadcast), by cyclic shifts: with
+    c_i = a_i b_{i+1} - a_{i+1} b_i, (a x b)_i = c_{i+1} (a few elementwise operations:
+    quick to compile and to run)."""
+    c = a * _shift(b) - _shift(a) * b
+    return _shift(c)
+
+
+def _shift(x):
+    """(x_1, x_2, x_0) over the last axis."""
+    return jnp.concatenate([x[..., 1:], x[..., :1]], axis=-1)
 
 
 JACOBI_SWEEPS = 6  # cyclic sweeps; a 3 x 3 matrix converges to roundoff in about 4
@@ -77,7 +91,9 @@ def symmetric_eigenvalues3(S):
     tiny = jnp.finfo(dtype).tiny
     eye = jnp.eye(3, dtype=dtype)
     A = 0.5 * (S + jnp.swapaxes(S, -1, -2))
-    for _ in range(JACOBI_SWEEPS):
+
+    def sweep(_, A):  # a loop, not unrolled: every compiled program that checks an
+        # inertia tensor holds one sweep instead of six
         for p, q in ((0, 1), (0, 2), (1, 2)):
             apq = A[..., p, q]
             rotate = jnp.abs(apq) > tiny
@@ -90,4 +106,7 @@ def symmetric_eigenvalues3(S):
             G = G.at[..., p, p].set(c).at[..., q, q].set(c)
             G = G.at[..., p, q].set(s).at[..., q, p].set(-s)
             A = jnp.swapaxes(G, -1, -2) @ A @ G
+        return A
+
+    A = jax.lax.fori_loop(0, JACOBI_SWEEPS, sweep, A)
     return jnp.sort(jnp.diagonal(A, axis1=-2, axis2=-1), axis=-1)

@@ -272,3 +272,31 @@ def test_a_program_with_a_host_callback_is_traced_as_usual_with_a_warning(tmp_pa
         out = jaxrb.persistent_jit(prints, cache_dir=tmp_path)(jnp.asarray(1.0))
     assert float(out) == 2.0
     assert list(tmp_path.glob("*.bin")) == []
+
+
+def test_programs_are_traced_with_the_garbage_collector_paused(tmp_path):
+    """Python's cyclic garbage collector is off while a kept or plain entry point traces its
+    program (a third of a contact program's trace went to its passes) and back on after;
+    a caller that had turned it off keeps it off."""
+    import gc
+
+    seen = []
+
+    def double(x):
+        seen.append(gc.isenabled())  # runs only while tracing
+        return 2.0 * x
+
+    kept = persistent.persistent_jit(double, cache_dir=tmp_path)
+    plain = persistent.entry_point(lambda x: double(x) + 1.0)
+    assert gc.isenabled()
+    np.testing.assert_allclose(kept(jnp.arange(3.0)), [0.0, 2.0, 4.0])
+    np.testing.assert_allclose(plain(jnp.arange(2.0)), [1.0, 3.0])
+    assert seen == [False, False]
+    assert gc.isenabled()
+    gc.disable()
+    try:
+        with persistent.garbage_collection_paused():
+            pass
+        assert not gc.isenabled()
+    finally:
+        gc.enable()

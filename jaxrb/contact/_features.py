@@ -140,25 +140,23 @@ _BOX_SIGNS, _BOX_EDGES, _BOX_FACES, _BOX_FACE_AXES = _box_tables()
 
 
 def _polygon_mean_distance(vertices, centre):
-    """Mean distance (m) from `centre` of the points of the convex polygon `vertices` (K, 3)
-    (uniform density): the sum over the triangles (centre, v_k, v_k+1) of
-    (h^3 / 3) [F(t)] with F(t) = (t sqrt(1 + t^2) + asinh t) / 2, h the centre's distance to the
-    edge and t the edge coordinate over h, divided by the area."""
-    total, area = 0.0, 0.0
-    k = vertices.shape[0]
-    for i in range(k):
-        a, b = vertices[i] - centre, vertices[(i + 1) % k] - centre
-        edge = b - a
-        length = _safe_norm(edge)
-        along = edge / length
-        h = _safe_norm(jnp.cross(a, along))
-        ta, tb = jnp.dot(a, along) / h, jnp.dot(b, along) / h
+    """Mean distance (m) from `centre` (..., 3) of the points of the convex polygons
+    `vertices` (..., K, 3) (uniform density): the sum over the triangles (centre, v_k, v_k+1)
+    of (h^3 / 3) [F(t)] with F(t) = (t sqrt(1 + t^2) + asinh t) / 2, h the centre's distance
+    to the edge and t the edge coordinate over h, divided by the area. All edges at once."""
+    a = vertices - centre[..., None, :]
+    b = jnp.roll(a, -1, axis=-2)
+    edge = b - a
+    length = _safe_norm(edge, keepdims=True)
+    along = edge / length
+    h = _safe_norm(jnp.cross(a, along))
+    ta, tb = jnp.sum(a * along, axis=-1) / h, jnp.sum(b * along, axis=-1) / h
 
-        def F(t):
-            return 0.5 * (t * jnp.sqrt(1 + t * t) + jnp.arcsinh(t))
+    def F(t):
+        return 0.5 * (t * jnp.sqrt(1 + t * t) + jnp.arcsinh(t))
 
-        total = total + h**3 / 3 * (F(tb) - F(ta))
-        area = area + 0.5 * h * length
+    total = jnp.sum(h**3 / 3 * (F(tb) - F(ta)), axis=-1)
+    area = jnp.sum(0.5 * h * length[..., 0], axis=-1)
     return total / area
 
 
@@ -199,12 +197,7 @@ class BoxContact(CornerContact):
         eye = jnp.eye(3, dtype=a.dtype)
         self.normals = jnp.stack([sign * eye[axis] for axis, sign in _BOX_FACE_AXES])
         self.centres = self.normals * a + shape.offset
-        self.rho = jnp.stack(
-            [
-                _polygon_mean_distance(self.corners[jnp.asarray(ring)], c)
-                for ring, c in zip(_BOX_FACES, self.centres, strict=True)
-            ]
-        )
+        self.rho = _polygon_mean_distance(self.corners[np.asarray(_BOX_FACES)], self.centres)
 
     def cop_margin(self, face, normal_force, couple):
         # the face of `axis` is bounded by |x_j| <= a_j, |x_k| <= a_k; the centre of pressure

@@ -24,7 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._dynamics import accelerations
-from .._linalg import inverse3, solve as small_solve
+from .._linalg import cross, inverse3, solve as small_solve
 from .._quaternion import _safe_norm, quat_normalize, quat_to_matrix
 from .._rates import quat_rate
 from .._state import State
@@ -188,7 +188,8 @@ class Geometry(eqx.Module):
     frame but on a surface of several parts, where point i has part i's); the rotation R and
     angular velocity w; the contact points' offsets r (P, 3) from the mass centre, their
     rates r' (P, 3), gaps g (P,), gap rates g' (P,) and slips (P, 3); `region`: the
-    surface's region margin at the body's centre (see `Mode.side`)."""
+    surface's region margin at the body's centre (see `Mode.side`); `per_point`: whether
+    the rows of the frames differ (static)."""
 
     n: jax.Array
     t1: jax.Array
@@ -204,6 +205,7 @@ class Geometry(eqx.Module):
     gap_rate: jax.Array
     slip: jax.Array
     region: jax.Array
+    per_point: bool = eqx.field(static=True, default=False)
 
     def tangential(self, x):
         """The parts of vectors x (P, 3), one per contact point, along its surface."""
@@ -211,6 +213,8 @@ class Geometry(eqx.Module):
 
     def frame_of(self, i):
         """(n, t1, t2) of contact point `i`."""
+        if not self.per_point:  # one frame for all: no indexing by a traced point
+            i = 0
         return self.n[i], self.t1[i], self.t2[i]
 
 
@@ -269,7 +273,8 @@ def geometry(state: State, scene, model, seed, side=None) -> Geometry:
     w = R @ state.omega
     (n, t1, t2), (n_dot, t1_dot, t2_dot) = surface_frame(state, scene, model, R, w, side)
     # the normal in the body frame: one per part on a surface of several, else the one
-    down, down_rate = (n @ R, n_dot @ R) if scene.floor.parts > 1 else (R.T @ n[0], R.T @ n_dot[0])
+    several = scene.floor.parts > 1
+    down, down_rate = (n @ R, n_dot @ R) if several else (R.T @ n[0], R.T @ n_dot[0])
     down_dot = cross(down, state.omega) + down_rate
     if model.moving_points:
         p, p_dot = jax.jvp(lambda d: model.points(d, seed), (down,), (down_dot,))
@@ -285,7 +290,9 @@ def geometry(state: State, scene, model, seed, side=None) -> Geometry:
     region = jnp.ones((), state.pos.dtype)
     if scene.floor.curved:
         region = scene.floor.region(state.pos + R @ model.offset.astype(state.pos.dtype))
-    return Geometry(n, t1, t2, n_dot, t1_dot, t2_dot, R, w, r, r_dot, gap, gap_rate, slip, region)
+    return Geometry(
+        n, t1, t2, n_dot, t1_dot, t2_dot, R, w, r, r_dot, gap, gap_rate, slip, region, several
+    )
 
 
 def unit_or(x, fallback):
@@ -293,16 +300,6 @@ def unit_or(x, fallback):
     n = _safe_norm(x, keepdims=True)
     tiny = n <= 1e3 * jnp.finfo(x.dtype).tiny
     return jnp.where(tiny, fallback, x / jnp.where(tiny, 1.0, n))
-
-
-def cross(a, b):
-    """a x b over the last axis, with cyclic shifts of the components (a few elementwise
-    operations: quick to compile and to run)."""
-
-    def shift(x, k):  # (x_{i+k}) for i = 0, 1, 2
-        return jnp.concatenate([x[..., k:], x[..., :k]], axis=-1)
-
-    return shift(a, 1) * shift(b, 2) - shift(a, 2) * shift(b, 1)
 
 
 class Rows(eqx.Module):
@@ -424,7 +421,8 @@ def mode_rows(state, geom: Geometry, mode: Mode, hats, mu, scene, model, blend=N
     e1_b, e2_b = jnp.where(is_pair, cross(n_b, along_b), t1_b), jnp.where(is_pair, along_b, t2_b)
     p_d = jnp.stack([n_a, n_b, e1_a, e2_a, e1_b, e2_b])
     p_r = jnp.stack([ra, rb, ra, ra, rb, rb])
-    p_rdot = jnp.stack([geom.r_dot[i] for i in (mode.a, mode.b, mode.a, mode.a, mode.b, mode.b)])
+    slot_points = jnp.stack([mode.a, mode.b, mode.a, mode.a, mode.b, mode.b])
+    p_rdot = geom.r_dot[slot_points]
     zero = jnp.zeros((), dtype)
     p_pos = jnp.stack([geom.gap[mode.a], geom.gap[mode.b], zero, zero, zero, zero])
     p_dC = jnp.concatenate(
@@ -612,6 +610,36 @@ class SlidingSolver(eqx.Module):
         return Solution(acc, alpha, self.geom.R.T @ alpha, lam, rows, self.geom, hats)
 
 
+def column_rates(geom: Geometry, mode: Mode, mu, model) -> jax.Array:
+    """dC / d(hat j, component c) (3, 3, 6, 6) of `mode_rows`' force columns, j over the
+    sliding directions (at a, at b, the face's twist): the columns are affine in them, and
+    only slot 0 (a sliding point a, or a sliding face) and slot 1 (a sliding point b) move,
+    with the friction force -mu s_hat at the point (a face: -mu (s_1 t1 + s_2 t2) at its
+    centre, and the couple -mu rho s_3 n)."""
+    dtype = geom.R.dtype
+    mu = jnp.broadcast_to(mu, (model.num_points,))
+    eye = jnp.eye(3, dtype=dtype)
+    is_face = mode.kind == FACE
+
+    def column(r, force, couple=0.0):  # (3, 6): per component c, the column (f, r x f + k)
+        return jnp.concatenate([force, cross(r, force) + couple], axis=-1)
+
+    slide_a = jnp.where(~is_face & ~mode.stick[0], -mu[mode.a], 0.0)
+    slide_b = jnp.where(~is_face & ~mode.stick[1], -mu[mode.b], 0.0)
+    d = jnp.zeros((3, 3, NUM_ROWS, 6), dtype)
+    d = d.at[0, :, 0].set(column(geom.r[mode.a], slide_a * eye))
+    d = d.at[1, :, 1].set(column(geom.r[mode.b], slide_b * eye))
+    if model.num_faces:
+        n, t1, t2 = geom.frame_of(0)  # a face meets a plane: one frame
+        _, centres, rhos = model.face_frame()
+        slide_f = jnp.where(is_face & ~mode.stick[0], -mu[0], 0.0)
+        zero3 = jnp.zeros(3, dtype)
+        force = slide_f * jnp.stack([t1, t2, zero3])
+        couple = slide_f * jnp.stack([zero3, zero3, rhos[mode.face] * n])
+        d = d.at[2, :, 0].set(column(geom.R @ centres[mode.face], force, couple))
+    return d
+
+
 def sliding_solver(t, state: State, mode: Mode, scene, model, tol, geom) -> SlidingSolver:
     """The `SlidingSolver` of `mode` at `state` (unit quaternion), `geom` its geometry."""
     body = scene.body
@@ -619,14 +647,9 @@ def sliding_solver(t, state: State, mode: Mode, scene, model, tol, geom) -> Slid
     mu, _, _ = point_coefficients(scene, model)
     blend = tol.slip_blend
 
-    def columns(H):
-        hats = (H[0], H[1], H[2])
-        return mode_rows(state, geom, mode, hats, mu, scene, model, blend=blend).C
-
     zero = jnp.zeros((3, 3), dtype)
     rows = mode_rows(state, geom, mode, (zero[0], zero[1], zero[2]), mu, scene, model, blend)
-    # the columns are affine in the directions, so their derivative is exact at any one
-    d_columns = jnp.moveaxis(jax.jacfwd(columns)(zero), (2, 3), (0, 1))  # (3, 3, 6, 6)
+    d_columns = column_rates(geom, mode, mu, model)
     minv = lambda C: inverse_mass_columns(body, geom.R, C)  # noqa: E731 (linear in C)
     minv_C = minv(rows.C)
     d_minv = jax.vmap(jax.vmap(minv))(d_columns)

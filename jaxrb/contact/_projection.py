@@ -7,6 +7,7 @@ would. Positions take two Gauss-Newton steps (the residuals are at the integrato
 level, so the second leaves them at roundoff).
 """
 
+import jax
 import jax.numpy as jnp
 
 from .._linalg import solve as small_solve
@@ -37,15 +38,17 @@ def _zero_hats(dtype):
 def project_positions(state: State, mode, scene, model, iterations: int = 2) -> State:
     """Active gaps and a face's tilt brought to zero."""
     dtype = state.pos.dtype
-    for _ in range(iterations):
+
+    def step(_, state):  # a loop: the compiled program holds one step, not `iterations`
         geom = geometry(state, scene, model, mode.seed, mode.side)
         rows = mode_rows(state, geom, mode, _zero_hats(dtype), 0.0, scene, model)
         delta = _correction(rows.J, rows.holonomic, rows.pos, scene.body, geom.R)
         turn = delta[3:]
         angle = _safe_norm(turn)
         quat = quat_normalize(quat_multiply(axis_angle_to_quat(turn, angle), state.quat))
-        state = State(state.pos + delta[:3], quat, state.vel, state.omega)
-    return state
+        return State(state.pos + delta[:3], quat, state.vel, state.omega)
+
+    return jax.lax.fori_loop(0, iterations, step, state)
 
 
 def project_velocities(state: State, mode, scene, model, slip_stop) -> State:
