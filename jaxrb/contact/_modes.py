@@ -615,7 +615,9 @@ def column_rates(geom: Geometry, mode: Mode, mu, model) -> jax.Array:
     sliding directions (at a, at b, the face's twist): the columns are affine in them, and
     only slot 0 (a sliding point a, or a sliding face) and slot 1 (a sliding point b) move,
     with the friction force -mu s_hat at the point (a face: -mu (s_1 t1 + s_2 t2) at its
-    centre, and the couple -mu rho s_3 n)."""
+    centre, and the couple -mu rho s_3 n). Written out beside `mode_rows`' columns (the
+    derivative of `mode_rows` traced a second copy of it into every contact program);
+    `test_sliding_solver_equals_the_direct_solve` holds the two equal."""
     dtype = geom.R.dtype
     mu = jnp.broadcast_to(mu, (model.num_points,))
     eye = jnp.eye(3, dtype=dtype)

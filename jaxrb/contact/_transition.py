@@ -141,10 +141,7 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol) -> EventOutcom
     # the part of a curved surface the ball now touches: past a junction the other one, else
     # where it is (the next segment keeps to that part's geometry, the `side` of its mode)
     crossed = ~impact & (trigger == model.num_points + JUNCTION)
-    if scene.floor.curved:
-        region = geometry(state, scene, model, mode.seed).region
-    else:  # a plane has one part
-        region = jnp.ones((), dtype)
+    region = geom.region  # an impact changes the velocities only: the region before it
     side = jnp.where(crossed, -mode.side, jnp.where(region >= 0, 1.0, -1.0)).astype(dtype)
     mode = eqx.tree_at(lambda m: m.side, mode, side)
     geom = geometry(state, scene, model, mode.seed, mode.side)
