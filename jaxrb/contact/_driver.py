@@ -26,7 +26,7 @@ from .._solver_settings import SolverSettings
 from .._state import State
 from .._trajectory import Trajectory
 from ._events import (
-    TimeBisection,
+    EventTime,
     cause_of,
     condition_tolerances,
     conditions,
@@ -210,7 +210,7 @@ class ContactProgram(eqx.Module):
         cond_tol = condition_tolerances(model, tol, ts.dtype)
         done = carry["done"]
         t0 = jnp.where(done, t_end, carry["t"])
-        out = at_event(t0, carry["y"], carry["mode"], carry["trigger"], scene, model, tol)
+        out = at_event(t0, carry["y"], carry["mode"], carry["trigger"], scene, model, tol, ~done)
         impacts = carry["impacts"]
         too_many = ~done & out.impact & (impacts.count >= options.max_impacts)
         do = ~done & ~too_many
@@ -378,11 +378,10 @@ def _event(model, tol):
         return smallest(t, y, args)
 
     # The event fires on a down-crossing only (direction=False): the condition is positive
-    # at the bracket's lower end and at most 0 at its upper end, so the bisection's
-    # orientation is known (flip=True: a negative value moves the upper end). Detecting
-    # it, or widening the bracket, would evaluate the condition at extra places: each is
-    # another copy of the mode solve in the compiled program.
-    root_finder = TimeBisection(rtol=tol.event, atol=tol.event, flip=True)
+    # at the bracket's lower end and at most 0 at its upper end, so the root finder knows
+    # the orientation. Detecting it, or widening the bracket, would evaluate the condition
+    # at extra places: each is another copy of the mode solve in the compiled program.
+    root_finder = EventTime(rtol=tol.event, atol=tol.event)
     return dfx.Event(condition, root_finder=root_finder, direction=False)
 
 

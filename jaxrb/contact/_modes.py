@@ -19,6 +19,7 @@ has only one row along the line, slot 3, since both ends move along it together)
 """
 
 import equinox as eqx
+import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -488,13 +489,27 @@ def inverse_mass_columns(body, R, C):
 
 
 def solve_rows(rows: Rows, minv_C, rhs):
-    """lambda with (J M^-1 C) lambda = rhs on the used rows (0 on the others)."""
+    """lambda with (J M^-1 C) lambda = rhs on the used rows (0 on the others; no solve where
+    no row is used, as in flight)."""
     dtype = rhs.dtype
-    A = rows.J @ minv_C.T
-    both = rows.mask[:, None] & rows.mask[None, :]
-    A = jnp.where(both, A, jnp.eye(NUM_ROWS, dtype=dtype))
-    lam = small_solve(A, jnp.where(rows.mask, rhs, 0.0))
-    return jnp.where(rows.mask, lam, 0.0)
+
+    def solve():
+        A = rows.J @ minv_C.T
+        both = rows.mask[:, None] & rows.mask[None, :]
+        A = jnp.where(both, A, jnp.eye(NUM_ROWS, dtype=dtype))
+        lam = small_solve(A, jnp.where(rows.mask, rhs, 0.0))
+        return jnp.where(rows.mask, lam, 0.0)
+
+    return only_where_needed(rows.mask, solve, jnp.zeros_like(rhs))
+
+
+def only_where_needed(needed, compute, skipped):
+    """`compute()` if `needed` holds anywhere, else `skipped` (the same structure): for work
+    whose result is used only where `needed` is true. The test is taken across a vmapped
+    batch (`equinox.internal.unvmap_any`), so the skip holds under `jax.vmap` too: where any
+    member needs the work it runs for all, and the others' results are discarded by the
+    caller as before."""
+    return jax.lax.cond(eqxi.unvmap_any(needed), compute, lambda: skipped)
 
 
 def sliding_hats(geom: Geometry, twist, mode: Mode, blend):
@@ -525,12 +540,12 @@ class Solution(eqx.Module):
         g = self.geom
         return self.acc + cross(self.alpha, g.r) + cross(g.w, g.r_dot)
 
-    def twist_rate(self, state, model, face) -> jax.Array:
+    def twist_rate(self, model, face) -> jax.Array:
         """Rate of the face's slip twist."""
         g = self.geom
         _, centres, rhos = model.face_frame()
         if not model.num_faces:
-            return jnp.zeros(3, state.pos.dtype)
+            return jnp.zeros(3, self.acc.dtype)
         rc = g.R @ centres[face]
         ac = self.acc + cross(self.alpha, rc) + cross(g.w, cross(g.w, rc))
         n, t1, t2 = g.frame_of(0)  # a face meets a plane: one frame
@@ -682,6 +697,14 @@ def unit_state(y: State) -> State:
 
 
 def mode_rates(t, y: State, mode: Mode, scene, model, tol) -> State:
-    """d(state)/dt in `mode`: the right-hand side of a contact segment."""
-    sol = solve_mode(t, unit_state(y), mode, scene, model, tol)
-    return State(pos=y.vel, quat=quat_rate(y.quat, y.omega), vel=sol.acc, omega=sol.omega_dot)
+    """d(state)/dt in `mode`: the right-hand side of a contact segment (in flight, of the
+    free body: no contact geometry is computed)."""
+
+    def in_contact():
+        sol = solve_mode(t, unit_state(y), mode, scene, model, tol)
+        return sol.acc, sol.omega_dot
+
+    acc, omega_dot = only_where_needed(
+        mode.kind != FLIGHT, in_contact, accelerations(t, unit_state(y), scene)
+    )
+    return State(pos=y.vel, quat=quat_rate(y.quat, y.omega), vel=acc, omega=omega_dot)

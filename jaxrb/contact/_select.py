@@ -7,6 +7,7 @@ consistent one in the table's order is taken: branch-free, so it jits and vmaps.
 """
 
 import equinox as eqx
+import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -22,6 +23,7 @@ from ._modes import (
     cross,
     face_twist,
     inverse_mass_columns,
+    only_where_needed,
     point_coefficients,
     sliding_solver,
     solve_mode,
@@ -156,10 +158,12 @@ def not_p_matrix(sol, mode, body) -> jax.Array:
     return ~jnp.where(mode.kind == PAIR, both, single)
 
 
-def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip):
+def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live):
     """Solve one candidate, finding the directions of any sliding that starts from rest by
     fixed-point iteration (s_hat <- s'(s_hat) / |s'(s_hat)|). Returns (the mode with those
-    directions, its margins: all must be >= 0 for it to be consistent)."""
+    directions, its margins: all must be >= 0 for it to be consistent). `live`: whether the
+    event's choice is used (False: a finished member of a batch, whose searches are
+    skipped)."""
     dtype = state.pos.dtype
     zero3 = jnp.zeros(3, dtype)
     twist, _ = face_twist(state, geom, model, mode.face)
@@ -198,7 +202,11 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip):
     u_dot = jnp.concatenate([held.acc, held.alpha])
     bp = frame.T @ (Jp @ u_dot - Kp @ lam[keep] + rows.bias[keep])
     mu, _, _ = point_coefficients(scene, model)
-    point_dir, found = point_sliding_direction(bp, frame.T @ Kp @ frame, mu[mode.a], *frame)
+    point_dir, found = only_where_needed(
+        live & (mode.kind == POINT) & rest_a,
+        lambda: point_sliding_direction(bp, frame.T @ Kp @ frame, mu[mode.a], *frame),
+        (zero3, jnp.array(False)),
+    )
     # (none found: at the cone's edge the slip's acceleration vanishes along the direction
     # opposite to the friction sticking needs, which the seed below already is)
     need_a = jnp.where((mode.kind == POINT) & found, -point_dir, need_a)
@@ -219,8 +227,14 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip):
         return acc[jnp.where(end == 0, mode.a, mode.b)], (sol.lam[0] >= 0) & (sol.lam[1] >= 0)
 
     end = jnp.where(scan_b, 1, 0)
-    end_dir, end_found = scan_direction(
-        lambda s: end_measure(end, s), *geom.frame_of(jnp.where(scan_b, mode.b, mode.a)), dtype
+    end_dir, end_found = only_where_needed(
+        live & pair & (rest_a != rest_b),
+        lambda: scan_direction(
+            lambda s: end_measure(end, s),
+            *geom.frame_of(jnp.where(scan_b, mode.b, mode.a)),
+            dtype,
+        ),
+        (zero3, jnp.array(False)),
     )
     exact_a = pair & rest_a & ~rest_b & end_found
     exact_b = scan_b & end_found
@@ -263,7 +277,11 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip):
         turning = jnp.stack([cross(aa, sa) @ ends[0][0], cross(ab, sb) @ ends[1][0]])
         return turning, jnp.stack([aa @ sa, ab @ sb]), (sol.lam[0] >= 0) & (sol.lam[1] >= 0)
 
-    pair_x, pair_found = newton_directions(pair_measure, seeds, dtype)
+    pair_x, pair_found = only_where_needed(
+        live & pair & rest_a & rest_b,
+        lambda: newton_directions(pair_measure, seeds, dtype),
+        (seeds[0], jnp.array(False)),
+    )
     exact_pair = pair & rest_a & rest_b & pair_found
     hats0 = (
         jnp.where(exact_pair, on_floor(pair_x[0], ends[0]), hats0[0]),
@@ -274,7 +292,7 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip):
 
     def slip_rates(sol):
         slip_acc = geom.tangential(sol.point_accelerations())
-        return slip_acc[mode.a], slip_acc[mode.b], sol.twist_rate(state, model, mode.face)
+        return slip_acc[mode.a], slip_acc[mode.b], sol.twist_rate(model, mode.face)
 
     def follow(rest, rate, hat):  # a single point's direction is exact already
         iterate = rest & (mode.kind != POINT) & (_safe_norm(rate) > small)
@@ -292,8 +310,16 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip):
         return followed, hats, sol
 
     # FIXED_POINT_ITERATIONS updates, then the solution with the last directions (one more
-    # pass of the same loop: the solve is traced, and compiled, once)
-    _, hats, sol = jax.lax.fori_loop(0, FIXED_POINT_ITERATIONS + 1, iterate, (hats0, hats0, held))
+    # pass of the same loop: the solve is traced, and compiled, once); where no direction
+    # follows in any candidate (of any member of a batch), the directions stay as they are
+    # and one pass gives the solution (no derivative flows here: a loop of traced length)
+    follows = live & (
+        (rest_a & ~exact_a & ~exact_pair & (mode.kind != POINT))
+        | (rest_b & ~exact_b & ~exact_pair)
+        | rest_f
+    )
+    passes = jnp.where(eqxi.unvmap_any(follows), FIXED_POINT_ITERATIONS + 1, 1)
+    _, hats, sol = jax.lax.fori_loop(0, passes, iterate, (hats0, hats0, held))
     P = model.num_points
     force = conditions(sol, mode, model, scene, tol)[P:]
     keep = jnp.array([True] * 5 + [False, False, True, False])  # not the slips, junction
@@ -368,14 +394,17 @@ def exclusions(table, candidates, model, old, trigger):
     )
 
 
-def select_mode(t, state, geom, old, trigger, scene, model, table, tol, resting, zero_slip):
+def select_mode(
+    t, state, geom, old, trigger, scene, model, table, tol, resting, zero_slip, live=True
+):
     """The next mode at an event (state after any impact). `resting`: (P,) points touching
-    with zero normal velocity; `zero_slip`: (P,) points whose slip is below slip_stop."""
+    with zero normal velocity; `zero_slip`: (P,) points whose slip is below slip_stop;
+    `live`: whether the choice is used (False: a finished member of a batch)."""
     candidates = table.candidates(resting)
 
     def one(i):
         mode = table.mode(i, old)
-        return _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip)
+        return _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live)
 
     modes, margins, still, paradox = jax.vmap(one)(candidates)
     t_active = jnp.asarray(table.active)[candidates]

@@ -19,6 +19,7 @@ from ._modes import (
     cross,
     geometry,
     no_derivative,
+    only_where_needed,
     point_coefficients,
     point_gaps,
     solve_mode,
@@ -66,9 +67,11 @@ def _kinetic(body, state):
     )
 
 
-def at_event(t, y: State, mode: Mode, trigger, scene, model, tol) -> EventOutcome:
+def at_event(t, y: State, mode: Mode, trigger, scene, model, tol, live=True) -> EventOutcome:
     """Apply the maps of an event at time `t` to the state `y` reached in `mode`; `trigger`
-    is the index of the condition that ended the segment (-1: the start of the run)."""
+    is the index of the condition that ended the segment (-1: the start of the run).
+    `live`: whether the outcome is used (False: a finished member of a batch, for which the
+    impact law and the searches for sliding directions are skipped)."""
     table = CandidateTable(model)
     body = scene.body
     e = scene.floor.restitution
@@ -98,7 +101,10 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol) -> EventOutcom
     penetration = jnp.maximum(-jnp.min(jnp.where(flat, jnp.inf, geom.gap)), 0.0)
 
     # the impact three ways; Newton-Coulomb unless it adds energy; its bounce series' limit
-    hits = solve_impacts(state, geom, points, hitting, scene, tol, frames, mu)
+    # (skipped where no member of a batch has an impact: its outcome is used only then)
+    solve = lambda: solve_impacts(state, geom, points, hitting, scene, tol, frames, mu)  # noqa: E731
+    none = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), jax.eval_shape(solve))
+    hits = only_where_needed(live & impact, solve, none)
     pick = lambda k: jax.tree.map(lambda x: x[k], hits)  # noqa: E731
     newton = pick(NEWTON)
     kinetic0 = _kinetic(body, state)
@@ -152,7 +158,7 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol) -> EventOutcom
     # rest starts in, a flat cap's seed) no derivative is taken: that keeps the reverse pass
     # small, and they matter only while the slip is below the blend speed
     choice = select_mode(
-        t,
+        no_derivative(t),
         *no_derivative((state, geom, mode)),
         trigger,
         no_derivative(scene),
@@ -161,6 +167,7 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol) -> EventOutcom
         tol,
         resting,
         zero_slip,
+        live,
     )
     new_mode = choice.mode
     state = project_positions(state, new_mode, scene, model)
