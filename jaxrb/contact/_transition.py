@@ -96,7 +96,8 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol, live=True) -> 
     points_rate = jnp.sum((state.vel + cross(geom.w, points)) * frames[0], axis=-1)
     hitting = points_gap <= jnp.where(ring, tol.flat, tol.contact)
     approaching = hitting & (points_rate < -tol.slip_stop)
-    impact = jnp.any(approaching)
+    # (for a finished member, `live` False, nothing is applied: its outcome is discarded)
+    impact = jnp.any(approaching) & live
     speed = jnp.max(jnp.where(approaching, -points_rate, 0.0))
     penetration = jnp.maximum(-jnp.min(jnp.where(flat, jnp.inf, geom.gap)), 0.0)
 
@@ -104,7 +105,7 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol, live=True) -> 
     # (skipped where no member of a batch has an impact: its outcome is used only then)
     solve = lambda: solve_impacts(state, geom, points, hitting, scene, tol, frames, mu)  # noqa: E731
     none = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), jax.eval_shape(solve))
-    hits = only_where_needed(live & impact, solve, none)
+    hits = only_where_needed(impact, solve, none)
     pick = lambda k: jax.tree.map(lambda x: x[k], hits)  # noqa: E731
     newton = pick(NEWTON)
     kinetic0 = _kinetic(body, state)
