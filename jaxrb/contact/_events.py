@@ -85,6 +85,17 @@ def force_margins(lam, rows, mode, model, geom, mu) -> jax.Array:
     )
 
 
+def mode_slips(sol: Solution, mode):
+    """The slips whose end the slip conditions watch (m/s, world; (2, 3)): at slot a a
+    point's slip or a face's slip twist, at slot b the pair's second point's; and whether
+    each slides in `mode` (2,)."""
+    kind, geom = mode.kind, sol.geom
+    on_face = kind == FACE
+    holds = (kind == POINT) | (kind == PAIR) | on_face
+    slips = jnp.stack([jnp.where(on_face, sol.rows.twist, geom.slip[mode.a]), geom.slip[mode.b]])
+    return slips, jnp.stack([holds & ~mode.stick[0], (kind == PAIR) & ~mode.stick[1]])
+
+
 def conditions(sol: Solution, mode, model, scene, tol) -> jax.Array:
     """The condition vector (P + 8,) of `mode` at the solution's state."""
     dtype = sol.acc.dtype
@@ -94,16 +105,12 @@ def conditions(sol: Solution, mode, model, scene, tol) -> jax.Array:
     gaps = jnp.where(active_points(model, mode), big, geom.gap - threshold)
     mu, _, _ = point_coefficients(scene, model)
     force = force_margins(sol.lam / scene.body.mass, rows, mode, model, geom, mu)
-    kind = mode.kind
-    holds = (kind == POINT) | (kind == PAIR) | (kind == FACE)
     # a slide ends when its slip has stopped: one that started from rest when its slip,
     # along the direction it started in, has passed zero (by half the blend speed, where
     # friction still opposes that direction); any other when its speed has fallen to the
     # stop speed (a slip that only turns, as a coin's on its rim, does not end it)
-    on_face = kind == FACE
-    slip_a = jnp.where(on_face, rows.twist, geom.slip[mode.a])
-    dir_a = jnp.where(on_face, mode.twist_dir, mode.slide_dir[0])
-    slip_b, dir_b = geom.slip[mode.b], mode.slide_dir[1]
+    slips, sliding = mode_slips(sol, mode)
+    dir_a = jnp.where(mode.kind == FACE, mode.twist_dir, mode.slide_dir[0])
 
     def slip_condition(slip, direction, from_rest):
         turned = slip @ direction + 0.5 * tol.slip_blend
@@ -111,10 +118,10 @@ def conditions(sol: Solution, mode, model, scene, tol) -> jax.Array:
         # next mode may stick, whatever the root finder's resolution
         return jnp.where(from_rest, turned, _safe_norm(slip) - 0.5 * tol.slip_stop)
 
-    end_a = slip_condition(slip_a, dir_a, mode.from_rest[0])
-    end_b = slip_condition(slip_b, dir_b, mode.from_rest[1])
-    force = force.at[SLIP_A].set(jnp.where(holds & ~mode.stick[0], end_a, big))
-    force = force.at[SLIP_B].set(jnp.where((kind == PAIR) & ~mode.stick[1], end_b, big))
+    end_a = slip_condition(slips[0], dir_a, mode.from_rest[0])
+    end_b = slip_condition(slips[1], mode.slide_dir[1], mode.from_rest[1])
+    force = force.at[SLIP_A].set(jnp.where(sliding[0], end_a, big))
+    force = force.at[SLIP_B].set(jnp.where(sliding[1], end_b, big))
     # the ball passes to another part of a curved surface (its curvature jumps there)
     junction = jnp.where(scene.floor.curved, mode.side * geom.region, big)
     return jnp.concatenate([gaps, force, junction[None]])

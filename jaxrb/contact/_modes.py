@@ -500,16 +500,16 @@ def solve_rows(rows: Rows, minv_C, rhs):
         lam = small_solve(A, jnp.where(rows.mask, rhs, 0.0))
         return jnp.where(rows.mask, lam, 0.0)
 
-    return only_where_needed(rows.mask, solve, jnp.zeros_like(rhs))
+    return only_where_needed(rows.mask, solve, lambda: jnp.zeros_like(rhs))
 
 
-def only_where_needed(needed, compute, skipped):
-    """`compute()` if `needed` holds anywhere, else `skipped` (the same structure): for work
-    whose result is used only where `needed` is true. The test is taken across a vmapped
-    batch (`equinox.internal.unvmap_any`), so the skip holds under `jax.vmap` too: where any
-    member needs the work it runs for all, and the others' results are discarded by the
-    caller as before."""
-    return jax.lax.cond(eqxi.unvmap_any(needed), compute, lambda: skipped)
+def only_where_needed(needed, compute, otherwise):
+    """`compute()` if `needed` holds anywhere, else `otherwise()` (the same structure): for
+    work whose result is used only where `needed` is true. The test is taken across a
+    vmapped batch (`equinox.internal.unvmap_any`), so the skip holds under `jax.vmap` too:
+    where any member needs the work it runs for all, and the others' results are discarded
+    by the caller as before."""
+    return jax.lax.cond(eqxi.unvmap_any(needed), compute, otherwise)
 
 
 def sliding_hats(geom: Geometry, twist, mode: Mode, blend):
@@ -705,6 +705,6 @@ def mode_rates(t, y: State, mode: Mode, scene, model, tol) -> State:
         return sol.acc, sol.omega_dot
 
     acc, omega_dot = only_where_needed(
-        mode.kind != FLIGHT, in_contact, accelerations(t, unit_state(y), scene)
+        mode.kind != FLIGHT, in_contact, lambda: accelerations(t, unit_state(y), scene)
     )
     return State(pos=y.vel, quat=quat_rate(y.quat, y.omega), vel=acc, omega=omega_dot)

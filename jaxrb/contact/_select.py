@@ -205,7 +205,7 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
     point_dir, found = only_where_needed(
         live & (mode.kind == POINT) & rest_a,
         lambda: point_sliding_direction(bp, frame.T @ Kp @ frame, mu[mode.a], *frame),
-        (zero3, jnp.array(False)),
+        lambda: (zero3, jnp.array(False)),
     )
     # (none found: at the cone's edge the slip's acceleration vanishes along the direction
     # opposite to the friction sticking needs, which the seed below already is)
@@ -234,7 +234,7 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
             *geom.frame_of(jnp.where(scan_b, mode.b, mode.a)),
             dtype,
         ),
-        (zero3, jnp.array(False)),
+        lambda: (zero3, jnp.array(False)),
     )
     exact_a = pair & rest_a & ~rest_b & end_found
     exact_b = scan_b & end_found
@@ -280,7 +280,7 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
     pair_x, pair_found = only_where_needed(
         live & pair & rest_a & rest_b,
         lambda: newton_directions(pair_measure, seeds, dtype),
-        (seeds[0], jnp.array(False)),
+        lambda: (seeds[0], jnp.array(False)),
     )
     exact_pair = pair & rest_a & rest_b & pair_found
     hats0 = (

@@ -31,11 +31,10 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from ._events import mode_slips
 from ._modes import (
     FACE,
     FLIGHT,
-    PAIR,
-    POINT,
     active_points,
     no_derivative,
     solve_mode,
@@ -94,19 +93,10 @@ def slip_step_limit(sol, mode, model, tol) -> jax.Array:
     steps could step over."""
     geom = sol.geom
     dtype = geom.gap.dtype
-    kind = mode.kind
-    on_face = kind == FACE
-    holds = (kind == POINT) | (kind == PAIR) | on_face
+    slips, sliding = mode_slips(sol, mode)
+    slides = sliding & ~mode.from_rest
     accelerations = geom.tangential(sol.point_accelerations())
-    slip_a = jnp.where(on_face, sol.rows.twist, geom.slip[mode.a])
-    rate_a = jnp.where(on_face, sol.twist_rate(model, mode.face), accelerations[mode.a])
-    slides = jnp.stack(
-        [
-            holds & ~mode.stick[0] & ~mode.from_rest[0],
-            (kind == PAIR) & ~mode.stick[1] & ~mode.from_rest[1],
-        ]
-    )
-    slips = jnp.stack([slip_a, geom.slip[mode.b]])
+    rate_a = jnp.where(mode.kind == FACE, sol.twist_rate(model, mode.face), accelerations[mode.a])
     rates = jnp.stack([rate_a, accelerations[mode.b]])
     speed = jnp.linalg.norm(slips, axis=-1)
     change = jnp.linalg.norm(rates, axis=-1) + jnp.finfo(dtype).tiny

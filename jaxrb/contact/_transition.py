@@ -104,7 +104,7 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol, live=True) -> 
     # the impact three ways; Newton-Coulomb unless it adds energy; its bounce series' limit
     # (skipped where no member of a batch has an impact: its outcome is used only then)
     solve = lambda: solve_impacts(state, geom, points, hitting, scene, tol, frames, mu)  # noqa: E731
-    none = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), jax.eval_shape(solve))
+    none = lambda: jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), jax.eval_shape(solve))  # noqa: E731
     hits = only_where_needed(impact, solve, none)
     pick = lambda k: jax.tree.map(lambda x: x[k], hits)  # noqa: E731
     newton = pick(NEWTON)
