@@ -6,6 +6,7 @@ import jax.numpy as jnp
 
 from . import _host
 from ._checks import Requirement, as_float_array, finite, finite_nonnegative, raise_unmet
+from ._linalg import dot
 
 
 def set_contact_coefficients(surface, restitution, friction, rolling, spin):
@@ -120,4 +121,4 @@ class Floor(eqx.Module):
         """Signed distance (m) of world `points` (..., 3) above the plane (negative below);
         `side` is for surfaces of several parts (`Cone`), here unused."""
         n = self.normal.astype(points.dtype)
-        return points @ n - n[2] * self.height.astype(points.dtype)
+        return dot(points, n) - n[2] * self.height.astype(points.dtype)

@@ -7,18 +7,25 @@ queued behind the other, which deadlocks on a machine with two cores. These syst
 small (3 x 3 to 12 x 12), so elimination written out is also quick.
 """
 
+import functools
+import operator
+
 import jax
 import jax.numpy as jnp
 
 
 def _eliminate(M, rows, k):
     """Column k of the augmented matrix M eliminated below the diagonal, after swapping up
-    the row with the largest entry (partial pivoting)."""
-    col = jnp.where(rows >= k, jnp.abs(M[:, k]), -1.0)
-    p = jnp.argmax(col).astype(rows.dtype)
-    M = jnp.where((rows == k)[:, None], M[p], jnp.where((rows == p)[:, None], M[k], M))
-    factors = jnp.where(rows > k, M[:, k] / M[k, k], 0.0)
-    return M - factors[:, None] * M[k]
+    the row with the largest entry (partial pivoting). Written so that XLA makes two
+    kernels of it: the pivot search, and the swap with the elimination."""
+    col = M[:, k]
+    p = jnp.argmax(jnp.where(rows >= k, jnp.abs(col), -1.0)).astype(rows.dtype)
+    pivot_row, row_k = M[p], M[k]
+    # column k after the swap, and the factors that clear it below the diagonal
+    swapped_col = jnp.where(rows == k, col[p], jnp.where(rows == p, col[k], col))
+    factors = jnp.where(rows > k, swapped_col / col[p], 0.0)
+    swapped = jnp.where((rows == k)[:, None], pivot_row, jnp.where((rows == p)[:, None], row_k, M))
+    return swapped - factors[:, None] * pivot_row
 
 
 def solve(A, b, unroll: bool = False):
@@ -56,6 +63,35 @@ def solve(A, b, unroll: bool = False):
     return x[:, 0] if vector else x
 
 
+def _added(terms):
+    """The sum of the arrays `terms` (an iterable), added one after another."""
+    return functools.reduce(operator.add, terms)
+
+
+def dot(a, b):
+    """a . b over the last axis (..., n; broadcast), for a few components n. This and the
+    products below are written out component by component: elementwise work, which XLA
+    fuses with its neighbours, where a dot of a 3 x 3 matrix or a sum over three entries is
+    a kernel of its own in the compiled program (the contact programs ran tens of thousands
+    of them in a throw)."""
+    return _added(a[..., i] * b[..., i] for i in range(jnp.shape(a)[-1]))
+
+
+def matvec(A, x):
+    """A x for small matrices A (..., m, n) and vectors x (..., n) (broadcast)."""
+    return _added(A[..., :, i] * x[..., None, i] for i in range(A.shape[-1]))
+
+
+def vecmat(x, A):
+    """x A (..., n) for vectors x (..., m) and small matrices A (..., m, n)."""
+    return _added(x[..., i, None] * A[..., i, :] for i in range(A.shape[-2]))
+
+
+def matmul(A, B):
+    """A B for small matrices A (..., m, k) and B (..., k, n)."""
+    return _added(A[..., :, i, None] * B[..., None, i, :] for i in range(A.shape[-1]))
+
+
 def inverse3(J):
     """Inverse of 3 x 3 matrices (..., 3, 3) by cofactors: with rows r0, r1, r2 of J, the
     columns of J^-1 are r1 x r2, r2 x r0, r0 x r1 over det J = r0 . (r1 x r2)."""
@@ -67,16 +103,12 @@ def inverse3(J):
 
 
 def cross(a, b):
-    """a x b over the last axis (..., 3; broadcast), by cyclic shifts: with
-    c_i = a_i b_{i+1} - a_{i+1} b_i, (a x b)_i = c_{i+1} (a few elementwise operations:
-    quick to compile and to run)."""
-    c = a * _shift(b) - _shift(a) * b
-    return _shift(c)
-
-
-def _shift(x):
-    """(x_1, x_2, x_0) over the last axis."""
-    return jnp.concatenate([x[..., 1:], x[..., :1]], axis=-1)
+    """a x b over the last axis (..., 3; broadcast), written out by components (XLA fuses
+    the components' products and their stacking into one kernel: a cross product by
+    cyclic shifts of whole vectors took three)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return jnp.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
 JACOBI_SWEEPS = 6  # cyclic sweeps; a 3 x 3 matrix converges to roundoff in about 4

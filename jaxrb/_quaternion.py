@@ -146,8 +146,16 @@ def quat_rotate(q: Quat, v: Vec3) -> Vec3:
 
 
 def _safe_norm(x, axis=-1, keepdims=False):
-    """|x| with a zero (not NaN) gradient at x = 0 (the double-where trick)."""
-    sq = jnp.sum(x * x, axis=axis, keepdims=keepdims)
+    """|x| with a zero (not NaN) gradient at x = 0 (the double-where trick). Over a last axis
+    of a few components the squares are added one by one: elementwise work, which XLA fuses
+    with what comes before and after, where a sum is a reduction kernel of its own."""
+    if axis in (-1, x.ndim - 1) and x.shape[-1] <= 4:
+        sq = x[..., 0] * x[..., 0]
+        for i in range(1, x.shape[-1]):
+            sq = sq + x[..., i] * x[..., i]
+        sq = sq[..., None] if keepdims else sq
+    else:
+        sq = jnp.sum(x * x, axis=axis, keepdims=keepdims)
     nonzero = sq > 0
     return jnp.where(nonzero, jnp.sqrt(jnp.where(nonzero, sq, 1.0)), 0.0)
 

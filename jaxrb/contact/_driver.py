@@ -33,7 +33,16 @@ from ._events import (
     start_offsets,
 )
 from ._features import contact_model, contact_model_class
-from ._modes import FLIGHT, PAIR, flight_mode, mode_rates, solve_mode, unit_state
+from ._modes import (
+    FLIGHT,
+    PAIR,
+    flat,
+    flight_mode,
+    mode_rates,
+    solve_mode,
+    unflat,
+    unit_state,
+)
 from ._options import ContactOptions
 from ._record import ContactLog, add_impact, empty_impacts
 from ._step_limit import gap_step_limit, limited, step_limit_of
@@ -271,9 +280,8 @@ class ContactProgram(eqx.Module):
             sol = dfx.diffeqsolve(
                 dfx.ODETerm(
                     traced_once(
-                        lambda t, y, args: jax.tree.map(
-                            lambda rate: jnp.where(args.moving, rate, 0.0),
-                            mode_rates(t, y, args.mode, args.scene, model, tol),
+                        lambda t, y, args: jnp.where(
+                            args.moving, mode_rates(t, y, args.mode, args.scene, model, tol), 0.0
                         )
                     )
                 ),
@@ -281,7 +289,7 @@ class ContactProgram(eqx.Module):
                 t0=t0,
                 t1=t_end,
                 dt0=settings.dt0,
-                y0=y,
+                y0=flat(y),
                 args=_Segment(scene, mode, offsets, limit0, ~done),
                 saveat=dfx.SaveAt(
                     subs=[dfx.SubSaveAt(ts=jnp.clip(ts, t0, t_end)), dfx.SubSaveAt(t1=True)]
@@ -293,7 +301,7 @@ class ContactProgram(eqx.Module):
                 throw=False,
             )
         t_stop = sol.ts[1][0]
-        y_stop = jax.tree.map(lambda x: x[0], sol.ys[1])
+        y_stop = unflat(sol.ys[1][0])
         ev = jnp.asarray(sol.event_mask) & ~done
         res = RESULTS.promote(sol.result)
         failed = ~done & (res != RESULTS.successful) & (res != RESULTS.event_occurred)
@@ -323,7 +331,7 @@ class ContactProgram(eqx.Module):
             done=done | ~ev | failed,
             impacts=impacts,
             log=log,
-            buffer=jax.tree.map(keep, carry["buffer"], sol.ys[0]),
+            buffer=jax.tree.map(keep, carry["buffer"], unflat(sol.ys[0])),
             kind=jnp.where(owned, mode.kind, carry["kind"]),
             sliding=jnp.where(owned, _sliding(mode), carry["sliding"]),
             filled=filled | owned,
@@ -368,8 +376,8 @@ def _event(model, tol):
     by the offsets at its start)."""
 
     @traced_once
-    def smallest(t, y, args):
-        sol = solve_mode(t, unit_state(y), args.mode, args.scene, model, tol)
+    def smallest(t, y, args):  # y: the segment's flat state
+        sol = solve_mode(t, unit_state(unflat(y)), args.mode, args.scene, model, tol)
         values = conditions(sol, args.mode, model, args.scene, tol) + args.offsets
         # in JAX's default float dtype: diffrax compares it with a Python float internally
         return jnp.min(values).astype(jnp.result_type(float))
@@ -392,7 +400,9 @@ def contact_program(scene, settings, options, tol) -> ContactProgram:
     controller = limited(
         settings.controller,
         traced_once(
-            lambda t, y, args: gap_step_limit(t, y, args.mode, args.offsets, args.scene, model, tol)
+            lambda t, y, args: gap_step_limit(
+                t, unflat(y), args.mode, args.offsets, args.scene, model, tol
+            )
         ),
     )
     settings = eqx.tree_at(lambda s: s.controller, settings, controller)

@@ -32,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from .._linalg import vecmat
 from .._quaternion import _safe_norm
 from ._modes import FACE, PAIR, POINT, Solution, active_points, point_coefficients
 
@@ -69,7 +70,7 @@ def force_margins(lam, rows, mode, model, geom, mu) -> jax.Array:
         - jnp.abs(lam[3])
     )
     _, t1, t2 = geom.frame_of(0)  # a face meets a plane: one frame
-    couple_body = geom.R.T @ (lam[1] * t1 + lam[2] * t2)
+    couple_body = vecmat(lam[1] * t1 + lam[2] * t2, geom.R)
     cop = model.cop_margin(mode.face, lam[0], couple_body) / rows.rho
     return jnp.stack(
         [

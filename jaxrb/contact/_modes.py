@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._dynamics import accelerations
-from .._linalg import cross, inverse3, solve as small_solve
+from .._linalg import cross, dot, inverse3, matmul, matvec, solve as small_solve, vecmat
 from .._quaternion import _safe_norm, quat_normalize, quat_to_matrix
 from .._rates import quat_rate
 from .._state import State
@@ -232,7 +232,7 @@ def surface_frame(state: State, scene, model, R, w, side=None):
     if not surface.curved:
         zero = jnp.zeros(3, dtype)
         return per_point(surface.frame(dtype)), per_point((zero, zero, zero))
-    arm = R @ model.offset.astype(dtype)
+    arm = matvec(R, model.offset.astype(dtype))
     centre, centre_vel = state.pos + arm, state.vel + cross(w, arm)
     if surface.parts > 1:
         frames = lambda c: surface.part_frames(c, side)  # noqa: E731
@@ -271,26 +271,27 @@ def geometry(state: State, scene, model, seed, side=None) -> Geometry:
     corner.
     """
     R = quat_to_matrix(state.quat)
-    w = R @ state.omega
+    w = matvec(R, state.omega)
     (n, t1, t2), (n_dot, t1_dot, t2_dot) = surface_frame(state, scene, model, R, w, side)
     # the normal in the body frame: one per part on a surface of several, else the one
     several = scene.floor.parts > 1
-    down, down_rate = (n @ R, n_dot @ R) if several else (R.T @ n[0], R.T @ n_dot[0])
+    normal, normal_rate = (n, n_dot) if several else (n[0], n_dot[0])
+    down, down_rate = vecmat(normal, R), vecmat(normal_rate, R)
     down_dot = cross(down, state.omega) + down_rate
     if model.moving_points:
         p, p_dot = jax.jvp(lambda d: model.points(d, seed), (down,), (down_dot,))
     else:
         p = model.points(down, seed)
         p_dot = jnp.zeros_like(p)
-    r = p @ R.T
-    r_dot = cross(w, r) + p_dot @ R.T
+    r = matvec(R, p)
+    r_dot = cross(w, r) + matvec(R, p_dot)
     gap = point_gaps(scene.floor, state.pos + r, side)
     vel = state.vel + cross(w, r)
-    gap_rate = jnp.sum(vel * n, axis=-1)
+    gap_rate = dot(vel, n)
     slip = vel - gap_rate[:, None] * n
     region = jnp.ones((), state.pos.dtype)
     if scene.floor.curved:
-        region = scene.floor.region(state.pos + R @ model.offset.astype(state.pos.dtype))
+        region = scene.floor.region(state.pos + matvec(R, model.offset.astype(state.pos.dtype)))
     return Geometry(
         n, t1, t2, n_dot, t1_dot, t2_dot, R, w, r, r_dot, gap, gap_rate, slip, region, several
     )
@@ -333,11 +334,11 @@ def face_twist(state, geom, model, face):
     _, centres, rhos = model.face_frame()
     if not model.num_faces:
         return jnp.zeros(3, state.pos.dtype), jnp.ones((), state.pos.dtype)
-    rc = geom.R @ centres[face]
+    rc = matvec(geom.R, centres[face])
     vc = state.vel + cross(geom.w, rc)
     rho = rhos[face]
     n, t1, t2 = geom.frame_of(0)  # a face meets a plane: one frame
-    return jnp.stack([vc @ t1, vc @ t2, rho * (geom.w @ n)]), rho
+    return jnp.stack([dot(vc, t1), dot(vc, t2), rho * dot(geom.w, n)]), rho
 
 
 def _with_face_rows(state, geom, mode, hat_f, mu, scene, model, point_rows):
@@ -350,13 +351,13 @@ def _with_face_rows(state, geom, mode, hat_f, mu, scene, model, point_rows):
     zero, zero3 = jnp.zeros((), dtype), jnp.zeros(3, dtype)
     normals, centres, _ = model.face_frame()
     twist, rho = face_twist(state, geom, model, mode.face)
-    nu_w = R @ normals[mode.face]
-    rc = R @ centres[mode.face]
+    nu_w = matvec(R, normals[mode.face])
+    rc = matvec(R, centres[mode.face])
     f_d = jnp.stack([n, zero3, zero3, t1, t2, zero3])
     f_k = jnp.stack([zero3, t1, t2, zero3, zero3, n])
     centre_gap = scene.floor.gap(state.pos + rc)
     # d/dt (nu_w . t2) = w . t1 and d/dt (-nu_w . t1) = w . t2 near nu_w = -n
-    f_pos = jnp.stack([centre_gap, nu_w @ t2, -(nu_w @ t1), zero, zero, zero])
+    f_pos = jnp.stack([centre_gap, dot(nu_w, t2), -dot(nu_w, t1), zero, zero, zero])
     slide_force = n - mu * (hat_f[0] * t1 + hat_f[1] * t2)
     f_dC = jnp.concatenate([jnp.where(stick, n, slide_force)[None], f_d[1:]])
     f_kC = jnp.concatenate([jnp.where(stick, zero3, -mu * rho * hat_f[2] * n)[None], f_k[1:]])
@@ -390,7 +391,7 @@ def resisting_couple(w, n, mu_r, mu_s, radius, blend):
     direction is taken of the speed it makes at the ball's surface (r w_t, r w . n) over
     max(that speed, `blend`): below the blend speed (m/s) the couple falls linearly to zero,
     so a ball comes to rest smoothly rather than chattering."""
-    w_n = w @ n
+    w_n = dot(w, n)
     roll = radius * (w - w_n * n)
     spin = radius * w_n
     e_roll = roll / jnp.maximum(_safe_norm(roll), blend)
@@ -416,8 +417,9 @@ def mode_rows(state, geom: Geometry, mode: Mode, hats, mu, scene, model, blend=N
     # in its point's frame; a pair's tangential rows run across and along its line
     ra, rb = geom.r[mode.a], geom.r[mode.b]
     (n_a, t1_a, t2_a), (n_b, t1_b, t2_b) = geom.frame_of(mode.a), geom.frame_of(mode.b)
-    along_a = unit_or(rb - ra - ((rb - ra) @ n_a) * n_a, t1_a)
-    along_b = unit_or(rb - ra - ((rb - ra) @ n_b) * n_b, t1_b)
+    normals = jnp.stack([n_a, n_b])
+    across = (rb - ra) - dot(rb - ra, normals)[:, None] * normals
+    along_a, along_b = unit_or(across, jnp.stack([t1_a, t1_b]))
     e1_a, e2_a = jnp.where(is_pair, cross(n_a, along_a), t1_a), jnp.where(is_pair, along_a, t2_a)
     e1_b, e2_b = jnp.where(is_pair, cross(n_b, along_b), t1_b), jnp.where(is_pair, along_b, t2_b)
     p_d = jnp.stack([n_a, n_b, e1_a, e2_a, e1_b, e2_b])
@@ -460,7 +462,7 @@ def mode_rows(state, geom: Geometry, mode: Mode, hats, mu, scene, model, blend=N
     J = jnp.concatenate([d, cross(r, d) + k], axis=1)
     C = jnp.concatenate([dC, cross(r, dC) + kC], axis=1)
     point_vel = state.vel + cross(w, r)
-    bias = jnp.sum(d * cross(w, r_dot), axis=1)
+    bias = dot(d, cross(w, r_dot))
     if scene.floor.curved:  # a ball's point rows: their directions turn with the frame
         # (a pair's tangential rows turn otherwise than t1, t2, but they are used only
         # while their point sticks, with zero velocity, when the term vanishes)
@@ -468,12 +470,12 @@ def mode_rows(state, geom: Geometry, mode: Mode, hats, mu, scene, model, blend=N
         d_dot = jnp.stack(
             [g.n_dot[a], g.n_dot[b], g.t1_dot[a], g.t2_dot[a], g.t1_dot[b], g.t2_dot[b]]
         )
-        bias = bias + jnp.sum(d_dot * point_vel, axis=1)
+        bias = bias + dot(d_dot, point_vel)
     return Rows(
         J=J,
         C=C,
         bias=bias,
-        vel=jnp.sum(d * point_vel, axis=1) + k @ w,
+        vel=dot(d, point_vel) + matvec(k, w),
         pos=pos,
         mask=mask,
         holonomic=holonomic,
@@ -484,8 +486,8 @@ def mode_rows(state, geom: Geometry, mode: Mode, hats, mu, scene, model, blend=N
 
 def inverse_mass_columns(body, R, C):
     """M^-1 C_k for each column row C_k = (force, moment), world frame: (6, 6)."""
-    inv_iw = R @ inverse3(body.inertia_matrix) @ R.T
-    return jnp.concatenate([C[:, :3] / body.mass, C[:, 3:] @ inv_iw.T], axis=1)
+    inv_iw = matmul(matmul(R, inverse3(body.inertia_matrix)), R.T)
+    return jnp.concatenate([C[:, :3] / body.mass, matvec(inv_iw, C[:, 3:])], axis=1)
 
 
 def solve_rows(rows: Rows, minv_C, rhs):
@@ -494,7 +496,7 @@ def solve_rows(rows: Rows, minv_C, rhs):
     dtype = rhs.dtype
 
     def solve():
-        A = rows.J @ minv_C.T
+        A = matmul(rows.J, minv_C.T)
         both = rows.mask[:, None] & rows.mask[None, :]
         A = jnp.where(both, A, jnp.eye(NUM_ROWS, dtype=dtype))
         lam = small_solve(A, jnp.where(rows.mask, rhs, 0.0))
@@ -517,9 +519,9 @@ def sliding_hats(geom: Geometry, twist, mode: Mode, blend):
     the face's twist), s0 the mode's unit direction of that slip at the segment's start. Where
     the slip is large against `blend` (m/s) this is the slip's direction; where sliding starts
     from rest it is s0, and in between it turns smoothly."""
-    hat_a = unit_or(geom.slip[mode.a] + blend * mode.slide_dir[0], mode.slide_dir[0])
-    hat_b = unit_or(geom.slip[mode.b] + blend * mode.slide_dir[1], mode.slide_dir[1])
-    hat_f = unit_or(twist + blend * mode.twist_dir, mode.twist_dir)
+    seeds = jnp.stack([mode.slide_dir[0], mode.slide_dir[1], mode.twist_dir])
+    slips = jnp.stack([geom.slip[mode.a], geom.slip[mode.b], twist])
+    hat_a, hat_b, hat_f = unit_or(slips + blend * seeds, seeds)
     return hat_a, hat_b, hat_f
 
 
@@ -546,10 +548,10 @@ class Solution(eqx.Module):
         _, centres, rhos = model.face_frame()
         if not model.num_faces:
             return jnp.zeros(3, self.acc.dtype)
-        rc = g.R @ centres[face]
+        rc = matvec(g.R, centres[face])
         ac = self.acc + cross(self.alpha, rc) + cross(g.w, cross(g.w, rc))
         n, t1, t2 = g.frame_of(0)  # a face meets a plane: one frame
-        return jnp.stack([ac @ t1, ac @ t2, rhos[face] * (self.alpha @ n)])
+        return jnp.stack([dot(ac, t1), dot(ac, t2), rhos[face] * dot(self.alpha, n)])
 
 
 def solve_mode(t, state: State, mode: Mode, scene, model, tol, hats=None, geom=None) -> Solution:
@@ -572,14 +574,14 @@ def solve_mode(t, state: State, mode: Mode, scene, model, tol, hats=None, geom=N
     mu, _, _ = point_coefficients(scene, model)
     rows = mode_rows(state, geom, mode, hats, mu, scene, model, blend=tol.slip_blend)
     acc0, omega_dot0 = accelerations(t, state, scene)
-    u0_dot = jnp.concatenate([acc0, geom.R @ omega_dot0])
+    u0_dot = jnp.concatenate([acc0, matvec(geom.R, omega_dot0)])
     beta = jnp.asarray(beta, dtype)
     stab = jnp.where(rows.holonomic, 2 * beta * rows.vel + beta**2 * rows.pos, beta * rows.vel)
     minv_C = inverse_mass_columns(body, geom.R, rows.C)
-    lam = solve_rows(rows, minv_C, -(rows.J @ u0_dot + rows.bias + stab))
-    u_dot = u0_dot + lam @ minv_C
+    lam = solve_rows(rows, minv_C, -(matvec(rows.J, u0_dot) + rows.bias + stab))
+    u_dot = u0_dot + vecmat(lam, minv_C)
     acc, alpha = u_dot[:3], u_dot[3:]
-    return Solution(acc, alpha, geom.R.T @ alpha, lam, rows, geom, hats)
+    return Solution(acc, alpha, vecmat(alpha, geom.R), lam, rows, geom, hats)
 
 
 class SlidingSolver(eqx.Module):
@@ -696,15 +698,29 @@ def unit_state(y: State) -> State:
     return State(y.pos, quat_normalize(y.quat), y.vel, y.omega)
 
 
-def mode_rates(t, y: State, mode: Mode, scene, model, tol) -> State:
-    """d(state)/dt in `mode`: the right-hand side of a contact segment (in flight, of the
-    free body: no contact geometry is computed)."""
+def flat(y: State) -> jax.Array:
+    """A state as one vector (..., 13): pos, quat, vel, omega. A segment's solve runs on it,
+    so that diffrax's work per step (each stage's sums, the error norm, the saves, the
+    interpolation) is one array's, not four."""
+    return jnp.concatenate([y.pos, y.quat, y.vel, y.omega], axis=-1)
 
-    def in_contact():
-        sol = solve_mode(t, unit_state(y), mode, scene, model, tol)
+
+def unflat(x: jax.Array) -> State:
+    """The `State` of a vector (..., 13) made by `flat`."""
+    return State(x[..., 0:3], x[..., 3:7], x[..., 7:10], x[..., 10:13])
+
+
+def mode_rates(t, x: jax.Array, mode: Mode, scene, model, tol) -> jax.Array:
+    """d(state)/dt in `mode` of a flat state `x` (13,) (`flat`), flat: the right-hand side of
+    a contact segment (in flight, of the free body: no contact geometry is computed)."""
+
+    def in_contact():  # each branch takes the vector apart itself: XLA fuses it there
+        sol = solve_mode(t, unit_state(unflat(x)), mode, scene, model, tol)
         return sol.acc, sol.omega_dot
 
-    acc, omega_dot = only_where_needed(
-        mode.kind != FLIGHT, in_contact, lambda: accelerations(t, unit_state(y), scene)
-    )
-    return State(pos=y.vel, quat=quat_rate(y.quat, y.omega), vel=acc, omega=omega_dot)
+    def in_flight():
+        return accelerations(t, unit_state(unflat(x)), scene)
+
+    acc, omega_dot = only_where_needed(mode.kind != FLIGHT, in_contact, in_flight)
+    y = unflat(x)
+    return flat(State(pos=y.vel, quat=quat_rate(y.quat, y.omega), vel=acc, omega=omega_dot))
