@@ -63,33 +63,29 @@ def solve(A, b, unroll: bool = False):
     return x[:, 0] if vector else x
 
 
-def _added(terms):
-    """The sum of the arrays `terms` (an iterable), added one after another."""
-    return functools.reduce(operator.add, terms)
-
-
 def dot(a, b):
-    """a . b over the last axis (..., n; broadcast), for a few components n. This and the
-    products below are written out component by component: elementwise work, which XLA
-    fuses with its neighbours, where a dot of a 3 x 3 matrix or a sum over three entries is
-    a kernel of its own in the compiled program (the contact programs ran tens of thousands
-    of them in a throw)."""
-    return _added(a[..., i] * b[..., i] for i in range(jnp.shape(a)[-1]))
+    """a . b over the last axis (..., n; broadcast)."""
+    return jnp.sum(a * b, axis=-1)
 
 
 def matvec(A, x):
-    """A x for small matrices A (..., m, n) and vectors x (..., n) (broadcast)."""
-    return _added(A[..., :, i] * x[..., None, i] for i in range(A.shape[-1]))
+    """A x for small matrices A (..., m, n) and vectors x (..., n) (broadcast), written out
+    column by column: elementwise work, which XLA fuses with what comes before and after,
+    where a dot of a 3 x 3 matrix is a kernel of its own in the compiled program (a die's
+    throw ran tens of thousands of them). The other products here are a product and a sum:
+    as quick in the contact programs, and smaller to compile."""
+    terms = (A[..., :, i] * x[..., None, i] for i in range(A.shape[-1]))
+    return functools.reduce(operator.add, terms)
 
 
 def vecmat(x, A):
     """x A (..., n) for vectors x (..., m) and small matrices A (..., m, n)."""
-    return _added(x[..., i, None] * A[..., i, :] for i in range(A.shape[-2]))
+    return jnp.sum(x[..., :, None] * A, axis=-2)
 
 
 def matmul(A, B):
     """A B for small matrices A (..., m, k) and B (..., k, n)."""
-    return _added(A[..., :, i, None] * B[..., None, i, :] for i in range(A.shape[-1]))
+    return jnp.sum(A[..., :, :, None] * B[..., None, :, :], axis=-2)
 
 
 def inverse3(J):

@@ -149,7 +149,7 @@ def _safe_norm(x, axis=-1, keepdims=False):
     """|x| with a zero (not NaN) gradient at x = 0 (the double-where trick). Over a last axis
     of a few components the squares are added one by one: elementwise work, which XLA fuses
     with what comes before and after, where a sum is a reduction kernel of its own."""
-    if axis in (-1, x.ndim - 1) and x.shape[-1] <= 4:
+    if axis in (-1, x.ndim - 1) and 1 <= x.shape[-1] <= 4:
         sq = x[..., 0] * x[..., 0]
         for i in range(1, x.shape[-1]):
             sq = sq + x[..., i] * x[..., i]

@@ -5,7 +5,16 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxrb._linalg import inverse3, solve, symmetric_eigenvalues3
+from jaxrb._linalg import (
+    cross,
+    dot,
+    inverse3,
+    matmul,
+    matvec,
+    solve,
+    symmetric_eigenvalues3,
+    vecmat,
+)
 
 solve_jit = jax.jit(solve, static_argnames="unroll")
 
@@ -65,3 +74,27 @@ def test_inverse3_and_eigenvalues3_match_numpy():
     np.testing.assert_allclose(
         symmetric_eigenvalues3(S), np.linalg.eigvalsh(S), rtol=1e-12, atol=1e-12
     )
+
+
+def test_small_products_match_numpy():
+    """The written-out products (`cross`, `dot`, `matvec`, `vecmat`, `matmul`) with leading
+    axes and broadcasting, against numpy's, in float64."""
+    rng = np.random.default_rng(3)
+    a, b = rng.normal(size=(5, 3)), rng.normal(size=3)
+    R, M6 = rng.normal(size=(3, 3)), rng.normal(size=(6, 6))
+    P = rng.normal(size=(8, 3))
+    products = jax.jit(
+        lambda a, b, R, M6, P: (
+            cross(a, b),
+            dot(a, b),
+            matvec(R, P),  # R p for each row p of P
+            matvec(M6, M6[0]),
+            vecmat(a, R),
+            matmul(R, R.T),
+            matmul(M6, M6.T),
+        )
+    )(a, b, R, M6, P)
+    expected = (np.cross(a, b), a @ b, P @ R.T, M6 @ M6[0], a @ R, R @ R.T, M6 @ M6.T)
+    for got, want in zip(products, expected, strict=True):
+        assert got.shape == want.shape
+        np.testing.assert_allclose(got, want, rtol=1e-14, atol=1e-14)
