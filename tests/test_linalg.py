@@ -77,8 +77,8 @@ def test_inverse3_and_eigenvalues3_match_numpy():
 
 
 def test_small_products_match_numpy():
-    """The written-out products (`cross`, `dot`, `matvec`, `vecmat`, `matmul`) with leading
-    axes and broadcasting, against numpy's, in float64."""
+    """The small products (`cross`, `dot`, `matvec`, `vecmat`, `matmul`) with leading axes
+    and broadcasting, against numpy's, in float64."""
     rng = np.random.default_rng(3)
     a, b = rng.normal(size=(5, 3)), rng.normal(size=3)
     R, M6 = rng.normal(size=(3, 3)), rng.normal(size=(6, 6))
