@@ -8,14 +8,15 @@ U(-30, 30) rad/s per body axis and horizontal speed U(-0.5, 0.5) m/s; T = 5 s, 1
 - loop: the compiled one-die `jaxrb.simulate` called once per die;
 - vmap: `jax.jit(jax.vmap(jaxrb.simulate))` over the batch (every member runs as many passes
   as the longest throw);
-- lanes L: `jaxrb.simulate_throws` with L lanes refilled as throws finish.
+- lanes L: `jaxrb.simulate_throws` with L lanes refilled as throws finish; "default" is its
+  default lane count (`jaxrb.contact.default_lanes`: 1 on a CPU, 64 on a GPU).
 
 The table gives the steady wall time per die (the second call), the first call minus the
 steady one (compile), and how many dice keep the loop's impact count (a die's landing is
 chaotic: batched arithmetic differs from unbatched by roundoff, which a long tumbling throw
 amplifies; see `tests/test_contact_dice.py` for the short-horizon comparison).
 
-Run: python -m benchmarks.throw_batches --n 64 --lanes 8,16 --out bench_out
+Run: python -m benchmarks.throw_batches --n 64 --lanes default,8,16 --out bench_out
 """
 
 import argparse
@@ -82,9 +83,11 @@ def run(n, lanes, t_end):
     methods = [("loop of the compiled one-die simulate", loop)]
     methods.append(("jax.vmap(simulate)", lambda: vmapped(e, states)))
     for L in lanes:
+        count = jaxrb.contact.default_lanes(n) if L is None else L
+        label = f"{count} lane{'s' if count > 1 else ''}"
         methods.append(
             (
-                f"simulate_throws, {L} lanes",
+                f"simulate_throws, {'default: ' if L is None else ''}{label}",
                 lambda L=L: jaxrb.simulate_throws(
                     scenes, states, ts, batched_scene=True, lanes=L, max_impacts=MAX_IMPACTS
                 ),
@@ -132,12 +135,16 @@ def table(rows, loop_counts, n, t_end):
 def main(argv=None):
     p = argparse.ArgumentParser(description="batches of dice throws: loop, vmap, lanes")
     p.add_argument("--n", type=int, default=64, help="dice")
-    p.add_argument("--lanes", default="8,16", help="comma-separated lane counts")
+    p.add_argument(
+        "--lanes",
+        default="default,8,16",
+        help="comma-separated lane counts ('default': simulate_throws' own choice)",
+    )
     p.add_argument("--t-end", type=float, default=5.0)
     p.add_argument("--out", default=None, help="folder for throw_batches.md")
     p.add_argument("--force", action="store_true", help="overwrite an existing result")
     a = p.parse_args(argv)
-    lanes = [int(x) for x in a.lanes.split(",") if x]
+    lanes = [None if x == "default" else int(x) for x in a.lanes.split(",") if x]
     paths = C.output_paths(p, a.out, ["throw_batches.md"], a.force) if a.out else None
     rows, counts = run(a.n, lanes, a.t_end)
     text = table(rows, counts, a.n, a.t_end)

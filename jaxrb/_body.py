@@ -6,6 +6,7 @@ import numpy as np
 
 from . import _host, inertia as _inertia
 from ._checks import as_computed, is_concrete
+from ._linalg import inverse3
 from ._shapes import AbstractShape
 from ._typing import Mat3
 
@@ -25,6 +26,9 @@ class RigidBody(eqx.Module):
       plotting; if `inertia` is None it is computed from the shape as a uniform solid (about
       the shape's centre: give `inertia` for a shape with an `offset`).
 
+    `inertia_inverse` is None unless `with_inertia_inverse()` cached J^-1 (the contact engine
+    does, once per simulation, instead of inverting J at every evaluation of the equations).
+
     `mass` and `inertia` are array leaves: differentiate or vmap over them freely. Concrete
     values are validated on construction (mass > 0, finite; inertia symmetric, positive
     definite, triangle inequality); traced values are checked by `simulate`'s result flag.
@@ -34,6 +38,7 @@ class RigidBody(eqx.Module):
     inertia: jnp.ndarray
     shape: AbstractShape | None = None
     principal: bool = eqx.field(static=True, default=False)
+    inertia_inverse: jnp.ndarray | None = eqx.field(default=None, repr=False)
 
     def __init__(self, mass, inertia=None, shape=None, principal=None):
         self.mass = jnp.asarray(mass, dtype=float) if not hasattr(mass, "dtype") else mass
@@ -58,6 +63,7 @@ class RigidBody(eqx.Module):
         self.inertia = inertia
         self.shape = shape
         self.principal = bool(principal)
+        self.inertia_inverse = None
 
     def __check_init__(self):
         if is_concrete(self.mass) and np.ndim(self.mass) >= 0:
@@ -70,6 +76,15 @@ class RigidBody(eqx.Module):
                 raise ValueError(f"mass must be > 0, got {given}{subnormal}")
         if is_concrete(self.inertia):
             _inertia.check_inertia(self.inertia_matrix, name="inertia")
+
+    def with_inertia_inverse(self) -> "RigidBody":
+        """This body with J^-1 (kg^-1 m^-2, body axes) cached in `inertia_inverse`: inverted
+        once here, where the caller's program would otherwise invert J at every evaluation.
+        Only for a body whose `inertia` is not changed afterwards (the cache would be stale)."""
+        if self.principal:
+            return self
+        inverse = inverse3(self.inertia)
+        return eqx.tree_at(lambda b: b.inertia_inverse, self, inverse, is_leaf=lambda x: x is None)
 
     @property
     def inertia_matrix(self) -> Mat3:

@@ -31,7 +31,9 @@ def accelerations(t, state: State, scene):
     body = scene.body
     force, moment = total_wrench(t, state, scene)
     if scene.joint is None:
-        omega_dot = angular_acceleration(body.inertia, body.principal, state.omega, moment)
+        omega_dot = angular_acceleration(
+            body.inertia, body.principal, state.omega, moment, body.inertia_inverse
+        )
         return force / body.mass[..., None], omega_dot
     joint = scene.joint
     omega_dot = joint.angular_acceleration(

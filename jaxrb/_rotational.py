@@ -5,7 +5,7 @@ import jax.numpy as jnp
 from ._linalg import inverse3
 
 
-def angular_acceleration(inertia, principal: bool, omega, moment):
+def angular_acceleration(inertia, principal: bool, omega, moment, inverse=None):
     """Body-frame w_dot (rad/s^2) from J w_dot = M - w x (J w).
 
     **Arguments:**
@@ -14,9 +14,12 @@ def angular_acceleration(inertia, principal: bool, omega, moment):
       with products of inertia (the scalar form with all six entries, solved for w_dot).
     - `principal`: static flag selecting Euler's cheaper principal-axes equations.
     - `omega`, `moment`: body frame (rad/s, N m).
+    - `inverse`: J^-1 of the full tensor where the caller has it already, else None.
     """
     if principal:
         return (moment - jnp.cross(omega, inertia * omega)) / inertia
     J_omega = jnp.einsum("...ij,...j->...i", inertia, omega)
     rhs = moment - jnp.cross(omega, J_omega)
-    return jnp.einsum("...ij,...j->...i", inverse3(inertia), rhs)
+    if inverse is None:
+        inverse = inverse3(inertia)
+    return jnp.einsum("...ij,...j->...i", inverse, rhs)

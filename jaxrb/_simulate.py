@@ -131,7 +131,8 @@ def simulate(
     has NaN states; the others are computed. The solve is differentiable like a single
     body's (reverse mode by default, forward mode with `adjoint=diffrax.ForwardMode()`).
     `jax.vmap(simulate)` still works and gives each member its own step-size control. A
-    scene with a floor runs the contact engine per member (`jax.vmap` over the batch). To
+    scene with a floor runs the contact engine per member: on a CPU one member after
+    another (`jax.lax.map`, the cheapest there), elsewhere side by side (`jax.vmap`). To
     split a batch over several devices, or to give each member its own scene parameters, use
     `jaxrb.simulate_batch`.
 
@@ -168,7 +169,7 @@ def simulate(
         def one(s):
             return simulate_contact(scene, s, ts, settings, throw=throw, options=contact)
 
-        return one(state0) if n_batch is None else _vmap_members(one, state0)
+        return one(state0) if n_batch is None else _contact_members(one, state0)
     state0 = jax.tree.map(lambda x: jnp.asarray(x, ts.dtype), state0)
     if n_batch is None:
         traj = _simulate_smooth(scene, state0, ts, settings)
@@ -190,9 +191,17 @@ def batch_controller(controller):
     return controller
 
 
-def _vmap_members(fn, states0):
-    """`fn` (one body's `simulate`) mapped over the batch; `ts` returned once."""
-    traj = jax.vmap(fn)(states0)
+def _contact_members(fn, states0):
+    """`fn` (one body's `simulate` with a floor) mapped over the batch; `ts` returned once.
+
+    On a CPU the members run one after another (`jax.lax.map`): each runs only its own
+    events and steps, which costs the least there (about a loop of `simulate` over them,
+    in one call). Elsewhere they run side by side (`jax.vmap`), every member for as many
+    passes as the one with the most events."""
+    if jax.default_backend() == "cpu":
+        traj = jax.lax.map(fn, states0)
+    else:
+        traj = jax.vmap(fn)(states0)
     return eqx.tree_at(lambda t: t.ts, traj, traj.ts[0])
 
 

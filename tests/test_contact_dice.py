@@ -160,10 +160,12 @@ def _assert_member_is_its_own_run(run, batch, i, omega, z):
     )
 
 
-def test_throws_in_refilled_lanes_equal_per_throw_runs(getkey):
-    """`simulate_throws`: 7 throws in 3 lanes (finished lanes take the next throw) give each
-    throw the trajectory of its own `simulate` run, up to the problem's conditioning (as in
-    the vmap test above); a throw with bad input is flagged and the others are computed."""
+@pytest.mark.parametrize("lanes", [3, 1])
+def test_throws_in_refilled_lanes_equal_per_throw_runs(getkey, lanes):
+    """`simulate_throws`: 7 throws in 3 lanes (finished lanes take the next throw), or in one
+    (one throw after another, the CPU's default) give each throw the trajectory of its own
+    `simulate` run, up to the problem's conditioning (as in the vmap test above); a throw
+    with bad input is flagged and the others are computed."""
     scene = _tumbler(jaxrb.Box((A_DIE, A_DIE, A_DIE)), 0.6, 0.3)
     n = 7
     omegas = jax.random.normal(getkey(), (n, 3)) * 10.0
@@ -171,7 +173,7 @@ def test_throws_in_refilled_lanes_equal_per_throw_runs(getkey):
     omegas = omegas.at[4, 1].set(jnp.nan)  # bad input
     ts = jnp.linspace(0.0, 0.15, 4)
     states0 = jax.vmap(lambda w, z: _throw(omega=w, z=z))(omegas, heights)
-    out = jaxrb.simulate_throws(scene, states0, ts, lanes=3, max_impacts=24)
+    out = jaxrb.simulate_throws(scene, states0, ts, lanes=lanes, max_impacts=24)
     assert out.states.pos.shape == (n, 4, 3)
     ok = np.asarray(out.result == jaxrb.RESULTS.successful)
     assert ok.tolist() == [True] * 4 + [False] + [True] * 2
@@ -183,6 +185,17 @@ def test_throws_in_refilled_lanes_equal_per_throw_runs(getkey):
 
     for i in np.flatnonzero(ok):
         _assert_member_is_its_own_run(run, out, int(i), omegas[i], heights[i])
+
+
+def test_default_lanes_follow_the_backend(monkeypatch):
+    """`simulate_throws`' default lane count: one lane where JAX's default backend is the CPU
+    (the cheapest per throw there, benchmarks/README.md), else min(N, 64)."""
+    from jaxrb.contact import _lanes
+
+    monkeypatch.setattr(_lanes.jax, "default_backend", lambda: "cpu")
+    assert [jaxrb.contact.default_lanes(n) for n in (1, 7, 1000)] == [1, 1, 1]
+    monkeypatch.setattr(_lanes.jax, "default_backend", lambda: "gpu")
+    assert [jaxrb.contact.default_lanes(n) for n in (1, 7, 1000)] == [1, 7, 64]
 
 
 # ------------------------------------------------------------------ sliding contact

@@ -12,7 +12,8 @@ The formulation is in docs/contact.md. One concern per file:
 - `_impact_law.py`: Newton's restitution with Coulomb friction at all touching points;
 - `_projection.py`: positions and velocities projected onto the active constraints;
 - `_transition.py`: what happens at an event;
-- `_driver.py`: the segment loop.
+- `_driver.py`: the segment loop;
+- `_lanes.py`: many throws in lanes refilled as throws finish (`jaxrb.simulate_throws`).
 
 Small linear systems are solved by `jaxrb._linalg` (plain jnp, no LAPACK).
 """
@@ -23,6 +24,7 @@ from ._features import (
     contact_model as contact_model,
 )
 from ._impact_law import solve_impacts as solve_impacts
+from ._lanes import default_lanes as default_lanes
 from ._modes import KIND_NAMES as KIND_NAMES
 from ._options import ContactOptions as ContactOptions
 from ._record import CAUSES as CAUSES, ContactLog as ContactLog, ImpactRecord as ImpactRecord

@@ -409,8 +409,20 @@ def contact_program(scene, settings, options, tol) -> ContactProgram:
     return ContactProgram(model, settings, options, tol)
 
 
+def with_inertia_inverse(scene):
+    """`scene` with its body's J^-1 computed once (`RigidBody.with_inertia_inverse`), not in
+    every evaluation of the equations inside the loops."""
+    return eqx.tree_at(lambda s: s.body, scene, scene.body.with_inertia_inverse())
+
+
 @entry_point
 def _simulate_contact(scene, state0, ts, settings, options, tol, loop_kind):
+    return run_throw(with_inertia_inverse(scene), state0, ts, settings, options, tol, loop_kind)
+
+
+def run_throw(scene, state0, ts, settings, options, tol, loop_kind) -> Trajectory:
+    """One throw's passes (the start, then one per event) in a loop of the `loop_kind`
+    ("lax" or "checkpointed"), and its `Trajectory`; traced inside an entry point."""
     program = contact_program(scene, settings, options, tol)
     carry = eqxi.while_loop(
         lambda c: ~jnp.all(c["done"]),

@@ -8,6 +8,13 @@ lane whose throw has finished writes its trajectory and takes the next throw not
 started, so that every lane keeps working until the throws run out, and a throw with few
 events costs few passes. Each lane runs exactly the passes of `jaxrb.simulate` (the same
 `ContactProgram`), so every throw's trajectory is the one `simulate` gives, to roundoff.
+
+With one lane (the default on a CPU) the throws run one after another, each through the
+program `simulate` compiles for one throw (`run_throw`), in a `jax.lax.map`: on a CPU that
+costs the least per throw, and it compiles what a single `simulate` compiles. On a CPU a
+batch gains little from running lanes side by side, since each of the program's many small
+operations costs about the same for a few lanes as for one, while a batch does the work
+that any one lane needs (an impact, a search for a slip direction) for all of them.
 """
 
 import diffrax as dfx
@@ -20,10 +27,17 @@ from .._inputs import save_times
 from .._persistent import entry_point
 from .._solver_settings import solver_settings
 from .._state import State
-from ._driver import check_contact_scene, contact_program
+from ._driver import check_contact_scene, contact_program, run_throw, with_inertia_inverse
 from ._options import ContactOptions
 
-DEFAULT_LANES = 64
+DEFAULT_LANES = 64  # on a GPU
+
+
+def default_lanes(n: int) -> int:
+    """The default number of lanes for `n` throws: 1 where JAX's default backend is the
+    CPU (measured there: one lane is the cheapest per throw, more lanes cost more), else
+    `min(n, DEFAULT_LANES)`."""
+    return 1 if jax.default_backend() == "cpu" else min(n, DEFAULT_LANES)
 
 
 def simulate_throws(
@@ -54,9 +68,9 @@ def simulate_throws(
     - `states0`: a `State` whose leaves have a leading axis N (quaternions of any non-zero
       norm).
     - `ts`: increasing save times (s), shape (T,), shared by every throw.
-    - `lanes`: how many throws run at once (default `min(N, 64)`); more lanes use the
-      hardware better (wider vector operations, a GPU's threads), fewer waste less work on
-      lanes left idle at the end.
+    - `lanes`: how many throws run at once (default `default_lanes(N)`: 1 on a CPU,
+      `min(N, 64)` on a GPU). More lanes use a GPU's threads; on a CPU one lane, the throws
+      one after another, costs the least (module docstring).
     - `solver`, `rtol`, `atol`, `dt0`, `max_steps`, `stepsize_controller`, `max_impacts`,
       `rest_speed`, `contact`: as in `jaxrb.simulate`.
 
@@ -86,7 +100,7 @@ def simulate_throws(
                     f"with batched_scene=True every array of the scene needs a leading axis "
                     f"of N = {n}, found one of shape {leaf.shape}"
                 )
-    lanes = min(n, DEFAULT_LANES) if lanes is None else int(lanes)
+    lanes = default_lanes(n) if lanes is None else int(lanes)
     if lanes < 1:
         raise ValueError(f"lanes must be >= 1, got {lanes}")
     lanes = min(lanes, n)
@@ -114,6 +128,7 @@ def simulate_throws(
 @entry_point
 def _throws(scene, states0, ts, settings, options, tol, lanes, batched_scene):
     n = states0.pos.shape[0]
+    scene = with_inertia_inverse(scene)
 
     def scene_of(i):
         return jax.tree.map(lambda x: x[i], scene) if batched_scene else scene
@@ -131,6 +146,14 @@ def _throws(scene, states0, ts, settings, options, tol, lanes, batched_scene):
 
     def trajectory(i, carry):
         return program_of(scene_of(i)).trajectory(carry, ts)
+
+    if lanes == 1:  # one throw after another, each through `simulate`'s own program
+
+        def one(i):
+            state0 = jax.tree.map(lambda x: x[i], states0)
+            return run_throw(scene_of(i), state0, ts, settings, options, tol, "lax")
+
+        return jax.lax.map(one, jnp.arange(n))
 
     first = jnp.arange(lanes)
     carries = jax.vmap(start)(first)

@@ -486,7 +486,10 @@ def mode_rows(state, geom: Geometry, mode: Mode, hats, mu, scene, model, blend=N
 
 def inverse_mass_columns(body, R, C):
     """M^-1 C_k for each column row C_k = (force, moment), world frame: (6, 6)."""
-    inv_iw = matmul(matmul(R, inverse3(body.inertia_matrix)), R.T)
+    inverse = body.inertia_inverse
+    if inverse is None:
+        inverse = inverse3(body.inertia_matrix)
+    inv_iw = matmul(matmul(R, inverse), R.T)
     return jnp.concatenate([C[:, :3] / body.mass, matvec(inv_iw, C[:, 3:])], axis=1)
 
 
