@@ -132,9 +132,10 @@ def simulate(
     body's (reverse mode by default, forward mode with `adjoint=diffrax.ForwardMode()`).
     `jax.vmap(simulate)` still works and gives each member its own step-size control. A
     scene with a floor runs the contact engine per member: on a CPU one member after
-    another (`jax.lax.map`, the cheapest there), elsewhere side by side (`jax.vmap`). To
-    split a batch over several devices, or to give each member its own scene parameters, use
-    `jaxrb.simulate_batch`.
+    another (`jax.lax.map`, the cheapest there; `jax.vmap(simulate)` runs every member for
+    as many events as the busiest one, at 3-5x the cost per die in benchmarks/README.md),
+    elsewhere side by side (`jax.vmap`). To split a batch over several devices, or to give
+    each member its own scene parameters, use `jaxrb.simulate_batch`.
 
     Quaternion-norm policy: the right-hand side normalises q before rotating vectors, the
     kinematics preserve |q| up to the solver's error, and saved quaternions are normalised;
