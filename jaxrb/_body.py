@@ -87,6 +87,14 @@ class RigidBody(eqx.Module):
         return eqx.tree_at(lambda b: b.inertia_inverse, self, inverse, is_leaf=lambda x: x is None)
 
     @property
+    def inertia_matrix_inverse(self) -> Mat3:
+        """J^-1 as a full 3x3 tensor (kg^-1 m^-2, body axes): the cached `inertia_inverse`
+        if there is one, else inverted here."""
+        if self.inertia_inverse is not None:
+            return self.inertia_inverse
+        return inverse3(self.inertia_matrix)
+
+    @property
     def inertia_matrix(self) -> Mat3:
         """The full 3x3 tensor (diagonal when given as principal moments)."""
         if self.principal:

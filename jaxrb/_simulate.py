@@ -22,6 +22,7 @@ from ._state import State
 from ._trajectory import Trajectory
 from .contact import ContactOptions
 from .contact._driver import simulate_contact
+from .contact._lanes import one_after_another
 
 
 def _coordinates(scene):
@@ -199,7 +200,7 @@ def _contact_members(fn, states0):
     events and steps, which costs the least there (about a loop of `simulate` over them,
     in one call). Elsewhere they run side by side (`jax.vmap`), every member for as many
     passes as the one with the most events."""
-    if jax.default_backend() == "cpu":
+    if one_after_another():
         traj = jax.lax.map(fn, states0)
     else:
         traj = jax.vmap(fn)(states0)

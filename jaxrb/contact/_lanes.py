@@ -33,11 +33,18 @@ from ._options import ContactOptions
 DEFAULT_LANES = 64  # on a GPU
 
 
+def one_after_another() -> bool:
+    """Whether batches of throws run one after another rather than side by side: where
+    JAX's default backend is the CPU (measured there: one throw at a time is the cheapest
+    per throw, side by side costs more). `default_lanes` and `simulate` of a batch of
+    states with a floor follow it."""
+    return jax.default_backend() == "cpu"
+
+
 def default_lanes(n: int) -> int:
-    """The default number of lanes for `n` throws: 1 where JAX's default backend is the
-    CPU (measured there: one lane is the cheapest per throw, more lanes cost more), else
-    `min(n, DEFAULT_LANES)`."""
-    return 1 if jax.default_backend() == "cpu" else min(n, DEFAULT_LANES)
+    """The default number of lanes for `n` throws: 1 where throws run `one_after_another`,
+    else `min(n, DEFAULT_LANES)`."""
+    return 1 if one_after_another() else min(n, DEFAULT_LANES)
 
 
 def simulate_throws(

@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._dynamics import accelerations
-from .._linalg import cross, dot, inverse3, matmul, matvec, solve as small_solve, vecmat
+from .._linalg import cross, dot, matmul, matvec, solve as small_solve, vecmat
 from .._quaternion import _safe_norm, quat_normalize, quat_to_matrix
 from .._rates import quat_rate
 from .._state import State
@@ -486,10 +486,7 @@ def mode_rows(state, geom: Geometry, mode: Mode, hats, mu, scene, model, blend=N
 
 def inverse_mass_columns(body, R, C):
     """M^-1 C_k for each column row C_k = (force, moment), world frame: (6, 6)."""
-    inverse = body.inertia_inverse
-    if inverse is None:
-        inverse = inverse3(body.inertia_matrix)
-    inv_iw = matmul(matmul(R, inverse), R.T)
+    inv_iw = matmul(matmul(R, body.inertia_matrix_inverse), R.T)
     return jnp.concatenate([C[:, :3] / body.mass, matvec(inv_iw, C[:, 3:])], axis=1)
 
 
