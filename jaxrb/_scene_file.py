@@ -191,6 +191,9 @@ class _Table:
         if key is None:
             field = self.where
         else:
+            # a key with a line break or another unprintable character is shown quoted, so
+            # that the message stays one line
+            key = key if str(key).isprintable() else repr(key)
             field = f"{self.where}.{key}" if self.where else _TOP_NAMES.get(key, key)
         raise SceneFileError(f"{self.source}: {field + ': ' if field else ''}{problem}")
 

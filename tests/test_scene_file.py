@@ -216,6 +216,12 @@ num_saves = 11
             "[[forces]][0].k",
             "unknown field",
         ),
+        # a key with a line break: quoted, so that the message stays one line
+        (
+            B + '"\\n" = 0\n' + S,
+            "[body].'\\n'",
+            "unknown field; allowed here: mass, inertia, shape",
+        ),
         # a floor needs a shape
         (
             B + "[floor]\nrestitution = 0.5\n" + S,
