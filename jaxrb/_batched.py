@@ -32,6 +32,7 @@ from ._solve import DEFAULT_MAX_STEPS, default_solver, solve
 from ._solver_settings import solver_settings
 from ._state import State
 from ._trajectory import Trajectory
+from ._unrolled_stages import batch_solver
 
 
 def batch_rms_norm(tree, member_axis: int = -1) -> jax.Array:
@@ -147,7 +148,9 @@ def simulate_batched(scene, states0, ts, settings, batched_scene=False, part=Non
 
 
 def _solve_part(scene, states0, ts, settings, batched_scene):
-    """One solve of all members of `states0` (see `simulate_batched`)."""
+    """One solve of all members of `states0` (see `simulate_batched`). Off a CPU, an explicit
+    Runge-Kutta solver takes its steps with the stages written out (`batch_solver`)."""
+    settings = eqx.tree_at(lambda s: s.solver, settings, batch_solver(settings.solver))
     coords = coordinates_for(scene)
     scene_axes = 0 if batched_scene else None
     dtype = ts.dtype
