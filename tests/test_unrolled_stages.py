@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import jaxrb
-from jaxrb import _unrolled_stages
+from jaxrb import _persistent, _unrolled_stages
 from jaxrb._unrolled_stages import UnrolledDopri8, UnrolledTsit5, batch_solver, unrolled
 
 TS = jnp.linspace(0.0, 3.0, 7)
@@ -88,8 +88,9 @@ def test_other_solvers_are_left_as_they_are():
 
 def test_batch_solve_off_a_cpu_uses_the_written_out_stages(monkeypatch):
     """`simulate` of a batch as one solve, as it runs on a GPU: the same steps as on a CPU,
-    the trajectories equal to roundoff. (The run off a CPU saves once more, at t = 1, so that
-    it is traced and compiled afresh, not taken from the compiled simulations kept.)"""
+    the trajectories equal to roundoff. The run off a CPU is traced afresh: it saves once
+    more (at t = 1), so it is not the program this process compiled for the first run, and
+    programs kept on disk are off for it (their key does not see the patched backend)."""
     scene = jaxrb.Scene(jaxrb.RigidBody(1.0, I123))
     omega = jnp.array([[1.0, 0.0, 1.5], [0.7, 0.0, 1.2], [1.3, 0.1, 1.9]])
     states = jaxrb.make_state(omega=omega)
@@ -104,6 +105,7 @@ def test_batch_solve_off_a_cpu_uses_the_written_out_stages(monkeypatch):
         seen.append(unrolled(solver))
         return seen[-1]
 
+    monkeypatch.setitem(_persistent._KEEP, "on", False)
     monkeypatch.setattr(_unrolled_stages, "_on_cpu", lambda: False)
     monkeypatch.setattr(_unrolled_stages, "unrolled", recorded)
     out = run(jnp.array([0.0, 1.0, 2.0, 5.0]))
