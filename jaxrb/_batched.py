@@ -240,7 +240,9 @@ def simulate_batch(
     - `dt0`: initial step (s); default: diffrax's heuristic, batch-wide.
     - `max_steps`: the solver's step budget, batch-wide.
     - `solver`: any diffrax solver; default as `simulate` for a batch: `diffrax.Dopri8()`
-      below rtol 1e-5 (and for a traced rtol), else `diffrax.Tsit5()`.
+      below rtol 1e-5 (and for a traced rtol), else `diffrax.Tsit5()`. Off a CPU a
+      `Tsit5`, `Dopri5` or `Dopri8` takes its steps with the stages written out (the same
+      method and steps; `jaxrb/_unrolled_stages.py`).
     - `adjoint`: as `simulate`: reverse mode by default, `diffrax.ForwardMode()` for forward
       mode.
     - `batched_scene`: see `scene`.
