@@ -681,30 +681,36 @@ def targets(rows, bound=1e-8):
         return ""
     lines = [
         f"Cheapest rows with error <= {bound:g} (float64), against {BATCHED} "
-        f"({batched.setting}, error {batched.error:.2e}, {batched.us_per_body:.1f} us/body):",
+        f"({batched.setting}, error {batched.error:.2e}, {batched.us_per_body:.3g} us/body):",
         "",
     ]
     for method in (
+        "jaxrb.simulate, batched state (one solve), Tsit5",
         "plain diffrax Dopri8, hand-written rhs, vmap",
         "plain diffrax Tsit5, hand-written rhs, vmap",
         "diffrax Dopri8, vmap(jaxrb.simulate)",
         "diffrax Tsit5, vmap(jaxrb.simulate)",
         "jnp RK4 fixed step, vmap",
         "MuJoCo C RK4, N bodies in one scene",
+        "jaxrb exact flow (torque_free_flow)",
     ):
         r = cheapest(method)
         if r is not None:
             lines.append(
-                f"- {method}: {r.setting}, error {r.error:.2e}, {r.us_per_body:.1f} us/body: "
+                f"- {method}: {r.setting}, error {r.error:.2e}, {r.us_per_body:.3g} us/body: "
                 f"{r.us_per_body / batched.us_per_body:.1f}x the batched solve's time"
             )
     grad = [r for r in rows if r.method.startswith("jaxrb.simulate, batched, Dopri8: reverse")]
     mujoco = cheapest("MuJoCo C RK4, N bodies in one scene")
-    if grad and mujoco is not None:
-        lines.append(
-            f"- the batched solve's reverse gradient over all N ({grad[0].us_per_body:.1f} "
-            f"us/body): MuJoCo's row takes {mujoco.us_per_body / grad[0].us_per_body:.1f}x as long"
+    if grad:
+        g = grad[0].us_per_body
+        line = (
+            f"- the batched solve's reverse gradient over all N: {g:.3g} us/body, "
+            f"{g / batched.us_per_body:.1f}x the cheapest forward solve's time"
         )
+        if mujoco is not None:
+            line += f"; MuJoCo's row takes {mujoco.us_per_body / g:.1f}x as long"
+        lines.append(line)
     default = [r for r in rows if r.method.startswith("vmap(jaxrb.simulate), default")]
     plain = [
         r
