@@ -76,7 +76,8 @@ def unrolled_step(solver, terms, t0, t1, y0, args, solver_state, made_jump):
     y_stage = y0
     for i in range(1, n_stages):
         y_stage = _combine(y0, tableau.a_lower[i - 1], ks)
-        t_stage = t0 + float(tableau.c[i - 1]) * dt
+        c = float(tableau.c[i - 1])
+        t_stage = t1 if c == 1.0 else t0 + c * dt  # as diffrax: exactly t1 at c = 1
         if fsal and i == n_stages - 1:
             f1 = terms.vf(t_stage, y_stage, args)
             k = terms.prod(f1, control)
