@@ -81,6 +81,7 @@ from ._splitting import simulate_splitting as simulate_splitting
 from ._state import State as State, make_state as make_state
 from ._surfaces import Bowl as Bowl, Cone as Cone, Wheel as Wheel
 from ._sweep import grid as grid, random_draws as random_draws, sweep as sweep
+from ._unrolled_stages import unrolled_solver as unrolled_solver
 from .contact._lanes import simulate_throws as simulate_throws
 
 # [contact]

@@ -85,7 +85,10 @@ def simulate(
       `state0` (whose solve shares its fixed cost per step over the batch), else
       `diffrax.Tsit5()` (5th order). A traced rtol (under jit) gets the choice for the
       default rtol 1e-8; a `stepsize_controller` of your own and scenes with a floor get
-      Tsit5. Measured: `benchmarks/README.md`, B1.
+      Tsit5. Measured: `benchmarks/README.md`, B1. For many forward runs of one body
+      without a floor (a `jax.vmap` sweep), `jaxrb.unrolled_solver(diffrax.Dopri8())` is
+      the same method at 3-4x less cost per body on a CPU (a reverse gradient compiles
+      1.5-3x longer with it).
     - `rtol`, `atol`: tolerances of the default PID step-size controller (default 1e-8 each;
       with float32, use about 1e-5).
     - `dt0`: initial step (s); default: chosen by the controller.

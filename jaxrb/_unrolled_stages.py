@@ -9,17 +9,24 @@ coefficients, known when the step is traced), and the compiler can fuse a stage'
 combination with its evaluation of the right-hand side. For a batch as one solve on a GPU,
 where each pass over the batch's arrays costs memory bandwidth, this is what a step costs.
 
-`unrolled(solver)` returns the written-out twin of `diffrax.Tsit5`, `Dopri5` or `Dopri8`
-(anything else is returned as it is). A step falls back to diffrax's own for what this does
-not cover: several terms, implicit tableaus, or vector fields diffrax marks as expensive.
+`unrolled_solver(solver)` (public as `jaxrb.unrolled_solver`) returns the written-out twin
+of `diffrax.Tsit5`, `Dopri5` or `Dopri8` (anything else is returned as it is). A step falls
+back to diffrax's own for what this does not cover: several terms, implicit tableaus, or
+vector fields diffrax marks as expensive.
 The twins take the same steps as diffrax's solvers; their results differ by roundoff (the
 sums run in another order and skip the tableau's zeros).
 
-Measured on B1 (the torque-free body, N = 1e6 as one solve) on an NVIDIA H200: Dopri8 at
-tol 5e-10 in float64 0.63 -> 0.25 us per body, Tsit5 at tol 1e-8 0.68 -> 0.37 us; in float32
-Dopri8 at tol 1e-6 0.16 -> 0.06 us. On a 2-core x86 CPU, where a batch runs in parts that
-fit a core's cache, the same change cost 0-10 % (and about 0.6 s more compiling):
-`batch_solver` uses the twins on other backends only.
+Where it pays (benchmarks/README.md, "stages written out"):
+- a batch as one solve on a GPU: B1 (the torque-free body, N = 1e6) on an NVIDIA H200,
+  Dopri8 at tol 5e-10 in float64 0.63 -> 0.25 us per body, float32 Dopri8 at tol 1e-6
+  0.16 -> 0.06 us. On a 2-core x86 CPU, where a batch runs in parts that fit a core's cache,
+  it cost 0-10 % more: `batch_solver` uses the twins off a CPU only.
+- one body's forward runs, alone or under `jax.vmap`, on a CPU (B1, N = 1000, error < 1e-8:
+  `jax.vmap(simulate)` with Dopri8 124 -> 30 us per body, with Tsit5 168 -> 56 us).
+Where it costs: compiling. A reverse-mode gradient's backward pass holds every stage's
+derivative written out (one free body's first gradient, Tsit5: 3.4 -> 5.1 s; Dopri8: 3.2 ->
+9.3 s), and a contact simulation's right-hand side is large: the die's program compiled
+4 s longer and ran no faster. So one body's solves keep diffrax's loop unless asked.
 """
 
 import diffrax as dfx
@@ -122,9 +129,17 @@ class UnrolledDopri8(_Unrolled, dfx.Dopri8):
 _TWINS = {dfx.Tsit5: UnrolledTsit5, dfx.Dopri5: UnrolledDopri5, dfx.Dopri8: UnrolledDopri8}
 
 
-def unrolled(solver):
+def unrolled_solver(solver):
     """The written-out twin of a `diffrax.Tsit5`, `Dopri5` or `Dopri8` (its exact class, not
-    a subclass); any other solver unchanged."""
+    a subclass); any other solver unchanged.
+
+    The twin is the same method: the same tableau, steps, dense output and adjoints, with
+    results equal to diffrax's to roundoff. Each step is traced as straight-line code instead
+    of diffrax's loop over the stages. Pass it as `simulate`'s `solver` for many forward
+    runs of one body without a floor: on a 2-core CPU, `jax.vmap(simulate)` of B1 cost 3-4x
+    less per body. A reverse-mode gradient compiles 1.5-3x longer with it. A batch as one
+    solve already uses it off a CPU. It is not for scenes with a floor: there it compiles
+    longer and runs no faster."""
     twin = _TWINS.get(type(solver))
     if twin is None:
         return solver
@@ -132,9 +147,9 @@ def unrolled(solver):
 
 
 def batch_solver(solver):
-    """The solver a batch integrated as one solve uses: the written-out twin (`unrolled`)
+    """The solver a batch integrated as one solve uses: the written-out twin (`unrolled_solver`)
     except on a CPU (see the module docstring for the measurements behind the choice)."""
-    return solver if _on_cpu() else unrolled(solver)
+    return solver if _on_cpu() else unrolled_solver(solver)
 
 
 def _on_cpu() -> bool:
