@@ -10,7 +10,8 @@ against the exact flow `jaxrb.torque_free_flow` when present).
 Methods: `jaxrb.simulate` with a batched state (the batch as one diffrax solve with
 batch-wide step control, one device), with its reverse-mode gradient over all N bodies and a
 forward-mode derivative; `simulate_batch` (the same solve, split over devices);
-`jax.vmap(jaxrb.simulate)` (each body its own solve), also with default settings; plain
+`jax.vmap(jaxrb.simulate)` (each body its own solve), also with default settings and with
+Dopri8's stages written out (`jaxrb.unrolled_solver`); plain
 diffrax on a hand-written 7-number right-hand side (quaternion + body omega), vmapped and as
 one batched solve, with the same solvers and tolerances; a fixed-step jnp RK4; the exact
 flow; scipy and MuJoCo.
@@ -152,7 +153,13 @@ def run(n=1000, dtypes=("float64", "float32"), n_python=10, quick=False, scaling
         if quick:
             vmap_tols = vmap_tols[1::2]
         for solver_name, solver in (
-            () if large else (("Dopri8", dfx.Dopri8()), ("Tsit5", dfx.Tsit5()))
+            ()
+            if large
+            else (
+                ("Dopri8", dfx.Dopri8()),
+                ("Tsit5", dfx.Tsit5()),
+                ("Dopri8 written out", jaxrb.unrolled_solver(dfx.Dopri8())),
+            )
         ):
             fn = jax.jit(
                 jax.vmap(
@@ -690,6 +697,7 @@ def targets(rows, bound=1e-8):
         "plain diffrax Tsit5, hand-written rhs, vmap",
         "diffrax Dopri8, vmap(jaxrb.simulate)",
         "diffrax Tsit5, vmap(jaxrb.simulate)",
+        "diffrax Dopri8 written out, vmap(jaxrb.simulate)",
         "jnp RK4 fixed step, vmap",
         "MuJoCo C RK4, N bodies in one scene",
         "jaxrb exact flow (torque_free_flow)",
