@@ -102,11 +102,12 @@ def run(n, lanes, t_end, n_loop=None):
     rows, loop_counts, loop_cost = [], None, None
     for name, fn in methods:
         first, steady, out = timed(fn)
-        members = n_loop if isinstance(out, list) else n
-        if isinstance(out, list):
+        if isinstance(out, list):  # the loop, over its own dice
+            members = n_loop
             counts = np.array([int(r.impacts.count) for r in out])
             ok = np.array([int(r.result._value) == 0 for r in out])
         else:
+            members = n
             counts = np.asarray(out.impacts.count)
             ok = np.asarray(out.result._value) == 0
         per_die = steady / members

@@ -35,23 +35,26 @@ import jax
 import jax.numpy as jnp
 
 
-def _combine(y0, coefficients, ks):
-    """y0 + sum_j c_j k_j over the non-zero c_j (Python floats: the sum keeps y0's dtype)."""
+def _weighted_sum(coefficients, ks):
+    """sum_j c_j k_j over the non-zero c_j (Python floats: the sum keeps the increments'
+    dtype), or None if every c_j is zero."""
     terms = [(float(c), k) for c, k in zip(coefficients, ks, strict=True) if float(c) != 0.0]
+    if not terms:
+        return None
 
-    def leaf(y, *k_leaves):
+    def leaf(*k_leaves):
         inc = None
         for (c, _), k in zip(terms, k_leaves, strict=True):
             inc = c * k if inc is None else inc + c * k
-        return y if inc is None else y + inc
+        return inc
 
-    return jax.tree.map(leaf, y0, *[k for _, k in terms])
+    return jax.tree.map(leaf, *[k for _, k in terms])
 
 
-def _dot(coefficients, ks, like):
-    """sum_j c_j k_j over the non-zero c_j; zeros shaped as `like` if there are none."""
-    zero = jax.tree.map(jnp.zeros_like, like)
-    return _combine(zero, coefficients, ks)
+def _combine(y0, coefficients, ks):
+    """y0 + sum_j c_j k_j over the non-zero c_j."""
+    inc = _weighted_sum(coefficients, ks)
+    return y0 if inc is None else jax.tree.map(jnp.add, y0, inc)
 
 
 def unrolled_step(solver, terms, t0, t1, y0, args, solver_state, made_jump):
@@ -97,7 +100,9 @@ def unrolled_step(solver, terms, t0, t1, y0, args, solver_state, made_jump):
         ks.append(jax.lax.optimization_barrier(k))
 
     y1 = y_stage if tableau.ssal else _combine(y0, tableau.b_sol, ks)
-    y_error = _dot(tableau.b_error, ks, y0)
+    y_error = _weighted_sum(tableau.b_error, ks)
+    if y_error is None:  # a tableau without an error estimate
+        y_error = jax.tree.map(jnp.zeros_like, y0)
     k_stacked = jax.tree.map(lambda *k: jnp.stack(k), *ks)
     dense_info = dict(y0=y0, y1=y1, k=k_stacked)
     new_state = (jnp.array(False), f1) if fsal else None
