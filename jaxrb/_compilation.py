@@ -14,7 +14,9 @@ program's entry point (the `jaxrb` command line calls it, and so can a script or
 - jaxrb's traced programs (`programs`): the persistent cache still needs every program
   traced before it can look it up, and tracing a contact simulation takes longer than
   loading its compiled code; `persistent_jit` keeps the traced programs of jaxrb's own
-  entry points beside the compiled ones.
+  entry points beside the compiled ones;
+- a size bound on that directory: the files used longest ago are removed when it holds
+  more (`jaxrb._cache_size`).
 """
 
 import os
@@ -23,6 +25,7 @@ from pathlib import Path
 
 import jax
 
+from ._cache_size import cache_max_bytes, prune_cache
 from ._persistent import keep_programs
 
 CPU_FLAG = "--xla_cpu_use_fusion_emitters=false"
@@ -55,13 +58,15 @@ def speed_up_compilation(
     nan_checks: bool = False,
     programs: bool = True,
     program_sources=None,
+    max_cache_mb: float | None = None,
 ) -> Path | None:
     """Turn on the persistent compilation cache (if `cache`) in `cache_dir` (default
     `default_cache_dir()`; a contact scene's program takes 0.5-2 MB there, an eager
-    operation's a few kB, and nothing is removed by itself: the directory can be deleted at
-    any time), and, if JAX has not started its CPU backend yet and `XLA_FLAGS` does not
-    choose otherwise, the quicker CPU kernel emitters. Changes process-wide settings: call it
-    once at the start of a program. Returns the cache directory (None without a cache).
+    operation's a few kB, its size is bounded by `max_cache_mb` below, and the directory can
+    be deleted at any time), and, if JAX has not started its CPU backend yet and `XLA_FLAGS`
+    does not choose otherwise, the quicker CPU kernel emitters. Changes process-wide
+    settings: call it once at the start of a program. Returns the cache directory (None
+    without a cache).
 
     `nan_checks=True` also makes equinox's run-time checks (`equinox.error_if`, used inside
     diffrax, optimistix and lineax) return NaN where they fail instead of raising through a
@@ -87,6 +92,11 @@ def speed_up_compilation(
     classes too (a force, a `sweep`'s function, a fit's residuals), keyed by the content
     of those files: they must then depend only on code there, in jaxrb and in the packages
     whose versions the key holds (`persistent_jit`).
+    `max_cache_mb` bounds the cache directory's size (megabytes; default
+    `$JAXRB_CACHE_MAX_MB`, else 1024; 0 or "none" in the variable: no bound). An upgrade or
+    an edit adds programs beside the old ones and nothing replaces them, so when the
+    directory holds more, the files used longest ago are removed (down to 80 % of the
+    bound), once, here.
     """
     if nan_checks and "EQX_ON_ERROR" not in os.environ:
         from ._solve import equinox_checks_mode, set_equinox_checks
@@ -101,6 +111,7 @@ def speed_up_compilation(
         return None
     directory = Path(cache_dir).expanduser() if cache_dir is not None else default_cache_dir()
     directory.mkdir(parents=True, exist_ok=True)
+    prune_cache(directory, cache_max_bytes(max_cache_mb))
     jax.config.update("jax_compilation_cache_dir", str(directory))
     if programs:
         keep_programs(True, directory / "programs", program_sources)

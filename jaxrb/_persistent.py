@@ -55,6 +55,8 @@ import jax
 import numpy as np
 from jax import export
 
+from ._cache_size import mark_used
+
 _PACKAGES = ("jax", "jaxlib", "equinox", "diffrax", "optimistix", "lineax")
 _RUNTIME_ERROR = getattr(jax.errors, "JaxRuntimeError", RuntimeError)  # XLA's, at run time
 
@@ -324,7 +326,8 @@ def persistent_jit(fn=None, *, cache_dir=None, sources=(), quiet=False):
     `equinox.filter_jit` untouched.
 
     Use it as `@persistent_jit` or `persistent_jit(fn, sources=("my_helpers/",))`. The
-    directory can be deleted at any time; nothing in it is removed by itself.
+    directory can be deleted at any time. Nothing in it is removed by `persistent_jit`;
+    `speed_up_compilation` bounds the size of its cache directory, `programs` included.
     """
     if fn is None:
         return functools.partial(persistent_jit, cache_dir=cache_dir, sources=sources, quiet=quiet)
@@ -431,6 +434,8 @@ def _load_or_export(key, fn, static, in_tree, leaves, cache_dir, quiet):
             found = [(a.shape, a.dtype) for a in exported.in_avals]
             if found != [(a.shape, a.dtype) for a in avals]:
                 exported = None
+            else:
+                mark_used(path)
         except Exception:  # a damaged or foreign file: export again and replace it
             exported = None
     if exported is None:
@@ -542,6 +547,7 @@ def _load_executable(path: Path, avals):
         found = [(a.shape, a.dtype) for a in jax.tree.leaves(compiled.args_info)]
         if found != [(a.shape, a.dtype) for a in avals]:
             return None
+        mark_used(path)
         return compiled, out_tree
     except Exception:  # noqa: BLE001  (a damaged or foreign file: removed, compiled again)
         path.unlink(missing_ok=True)

@@ -1,0 +1,114 @@
+"""A size bound on jaxrb's compilation cache directory.
+
+The directory `speed_up_compilation` sets up holds JAX's compiled programs (`<key>-cache`,
+with `<key>-atime` where JAX's own size limit is on) and jaxrb's kept programs in its
+`programs` folder (`<key>.bin`, `<key>.<machine>.exe`). Nothing there is ever replaced: an
+upgrade of jaxrb or JAX, or an edit to the code a program is keyed on, adds new files beside
+the old. `prune_cache` removes the least recently used files until the directory holds at
+most a given size; `speed_up_compilation` calls it once per process, before the first
+compile, with `DEFAULT_MAX_MB` or `$JAXRB_CACHE_MAX_MB`.
+
+A file's last use is the later of its access and modification times. jaxrb marks a kept
+program used when it loads it (`mark_used`). JAX reads its files without such a mark, and
+most file systems (Linux's default `relatime`) advance a file's access time on a read only
+where it is a day old or older than the file's last write: a JAX file may have been used up
+to `ACCESS_TIME_LAG_S` after its access time says, and it is counted as used then. (Taken
+at its word, the access time made the small programs that every run reads look older than
+the programs an edit had made obsolete hours before, and a prune removed the former.)
+A file another process is reading or writing at that moment may be removed under it: JAX
+and jaxrb then compile that program again.
+"""
+
+import os
+import time
+from pathlib import Path
+
+DEFAULT_MAX_MB = 1024.0  # megabytes (2**20 bytes): a test suite's programs take ~250 MB
+KEEP_FRACTION = 0.8  # a prune leaves this share of the bound, so that it is not run every time
+STALE_TEMPORARY_S = 3600.0  # a half-written file (`*.tmp`) older than this is left over
+ACCESS_TIME_LAG_S = 86400.0  # how far a file system's access time may lag a read (relatime)
+
+
+def cache_max_bytes(max_mb: float | None) -> int | None:
+    """The size bound in bytes: `max_mb` (megabytes, None: `$JAXRB_CACHE_MAX_MB`, else
+    `DEFAULT_MAX_MB`); None where the bound is off (`max_mb` or the variable <= 0, or
+    "none")."""
+    if max_mb is None:
+        text = os.environ.get("JAXRB_CACHE_MAX_MB", "").strip()
+        if text.lower() == "none":
+            return None
+        try:
+            max_mb = float(text) if text else DEFAULT_MAX_MB
+        except ValueError:
+            raise ValueError(
+                f"JAXRB_CACHE_MAX_MB must be a number of megabytes or 'none', got {text!r}"
+            ) from None
+    if max_mb <= 0:
+        return None
+    return int(max_mb * 2**20)
+
+
+def mark_used(path: Path) -> None:
+    """Record that the cached file `path` was used now (its access and modification
+    times), so that a prune keeps it over files used longer ago."""
+    try:
+        os.utime(path)
+    except OSError:
+        pass
+
+
+def _entries(directory: Path) -> list[tuple[float, int, list[Path]]]:
+    """(last use, size, files) of every cache entry in `directory` and its `programs`
+    folder; a JAX entry is its `-cache` file with its `-atime` file, used at the latest
+    time its access time allows (module docstring)."""
+    entries = []
+    now = time.time()
+    for folder in (directory, directory / "programs"):
+        try:
+            names = os.listdir(folder)
+        except OSError:
+            continue
+        for name in names:
+            if name.startswith(".") or name.endswith("-atime"):
+                continue  # JAX's lock file; an -atime file goes with its -cache file
+            path = folder / name
+            try:
+                st = path.stat()
+            except OSError:  # removed meanwhile by another process
+                continue
+            if not path.is_file():
+                continue
+            files, used = [path], max(st.st_atime, st.st_mtime)
+            if name.endswith(".tmp"):
+                if now - st.st_mtime < STALE_TEMPORARY_S:
+                    continue  # another process is writing it
+                used = 0.0  # left over by a process that stopped while writing: first out
+            if name.endswith("-cache"):  # JAX's: read without a mark
+                files.append(folder / (name[: -len("-cache")] + "-atime"))
+                used = max(st.st_mtime, st.st_atime + ACCESS_TIME_LAG_S)
+            entries.append((used, st.st_size, files))
+    return entries
+
+
+def prune_cache(directory, max_bytes: int | None) -> int:
+    """Remove the least recently used entries of the cache `directory` (module docstring)
+    while it holds more than `max_bytes`, down to `KEEP_FRACTION` of it; returns the bytes
+    removed (0 where it holds no more, or `max_bytes` is None)."""
+    if max_bytes is None:
+        return 0
+    entries = _entries(Path(directory))
+    total = sum(size for _, size, _ in entries)
+    if total <= max_bytes:
+        return 0
+    target = KEEP_FRACTION * max_bytes
+    removed = 0
+    for _, size, files in sorted(entries, key=lambda e: e[0]):
+        if total - removed <= target:
+            break
+        for f in files:
+            try:
+                f.unlink()
+            except OSError:  # already removed by another process
+                pass
+        removed += size
+    return removed

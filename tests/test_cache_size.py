@@ -1,0 +1,98 @@
+"""The size bound on the compilation cache directory (`jaxrb._cache_size`)."""
+
+import os
+import subprocess
+import sys
+import time
+
+import jax.numpy as jnp
+import pytest
+
+import jaxrb
+from jaxrb._cache_size import DEFAULT_MAX_MB, cache_max_bytes, prune_cache
+
+MB = 2**20
+
+
+def _entry(path, size, age_s):
+    """A file of `size` bytes last used `age_s` seconds ago."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(b"x" * size)
+    used = time.time() - age_s
+    os.utime(path, (used, used))
+    return path
+
+
+def test_the_least_recently_used_entries_go_first_down_to_the_kept_share(tmp_path):
+    programs = tmp_path / "programs"
+    day = 86400
+    old_jax = _entry(tmp_path / "old-cache", 3 * MB, 3 * day)  # JAX's: not read for days
+    old_atime = _entry(tmp_path / "old-atime", 8, 3 * day)  # JAX's own LRU mark: goes with it
+    old_program = _entry(programs / "a.bin", 2 * MB, 300)
+    middle = _entry(programs / "a.cafe.exe", 2 * MB, 200)
+    # a JAX file whose access time says 10 h ago may have been read since (the file
+    # system advances it once a day): it counts as used later than the programs above
+    lagging_jax = _entry(tmp_path / "new-cache", 2 * MB, 10 * 3600)
+    newest = _entry(programs / "b.bin", 1 * MB, 0)
+    lock = _entry(tmp_path / ".lockfile", 0, 1000)
+    # 10 MB (and 8 bytes) over a bound of 8 MB: prune to 0.8 * 8 = 6.4 MB, oldest first
+    removed = prune_cache(tmp_path, 8 * MB)
+    assert removed == 5 * MB
+    assert not old_jax.exists() and not old_atime.exists() and not old_program.exists()
+    assert middle.exists() and lagging_jax.exists() and newest.exists() and lock.exists()
+    # under the bound nothing goes
+    assert prune_cache(tmp_path, 8 * MB) == 0
+    assert middle.exists()
+    assert prune_cache(tmp_path, None) == 0
+
+
+def test_half_written_files_are_left_to_their_writer_unless_left_over(tmp_path):
+    fresh = _entry(tmp_path / "programs" / "c.123.tmp", MB, 10)
+    stale = _entry(tmp_path / "programs" / "d.456.tmp", MB, 2 * 3600)
+    kept = _entry(tmp_path / "e-cache", MB, 5000)  # used longer ago than the stale file
+    assert prune_cache(tmp_path, int(1.5 * MB)) == MB
+    assert fresh.exists() and kept.exists() and not stale.exists()
+
+
+def test_the_bound_comes_from_the_argument_or_the_environment(monkeypatch):
+    monkeypatch.delenv("JAXRB_CACHE_MAX_MB", raising=False)
+    assert cache_max_bytes(None) == int(DEFAULT_MAX_MB * MB)
+    assert cache_max_bytes(2.5) == int(2.5 * MB)
+    assert cache_max_bytes(0) is None
+    monkeypatch.setenv("JAXRB_CACHE_MAX_MB", "300")
+    assert cache_max_bytes(None) == 300 * MB
+    assert cache_max_bytes(10) == 10 * MB  # the argument wins
+    monkeypatch.setenv("JAXRB_CACHE_MAX_MB", "none")
+    assert cache_max_bytes(None) is None
+    monkeypatch.setenv("JAXRB_CACHE_MAX_MB", "lots")
+    with pytest.raises(ValueError, match="JAXRB_CACHE_MAX_MB.*'lots'"):
+        cache_max_bytes(None)
+
+
+def _double(x):
+    return 2.0 * x
+
+
+def test_a_loaded_program_is_marked_used(tmp_path):
+    """A kept program read back by a new caller counts as used now, so that a prune keeps
+    it over programs nobody has loaded for longer."""
+    jaxrb.persistent_jit(_double, cache_dir=tmp_path)(jnp.arange(3.0))
+    files = sorted(tmp_path.glob("*.bin")) + sorted(tmp_path.glob("*.exe"))
+    assert files
+    long_ago = time.time() - 10 * 86400
+    for f in files:
+        os.utime(f, (long_ago, long_ago))
+    out = jaxrb.persistent_jit(_double, cache_dir=tmp_path)(jnp.arange(3.0))
+    assert float(out[2]) == 4.0
+    used = [max(f.stat().st_atime, f.stat().st_mtime) for f in files if f.exists()]
+    assert max(used) > time.time() - 600
+
+
+def test_speed_up_compilation_prunes_its_directory_once_at_the_start(tmp_path):
+    """In a process of its own (the call changes process-wide settings)."""
+    old = _entry(tmp_path / "old-cache", 2 * MB, 3 * 86400)
+    new = _entry(tmp_path / "programs" / "new.bin", MB, 0)
+    code = f"import jaxrb; jaxrb.speed_up_compilation(cache_dir={str(tmp_path)!r})"
+    env = dict(os.environ, JAXRB_CACHE_MAX_MB="2.5", JAX_PLATFORMS="cpu")
+    subprocess.run([sys.executable, "-c", code], env=env, check=True, timeout=120)
+    assert not old.exists() and new.exists()
