@@ -43,7 +43,8 @@ def add_cache_option(parser) -> None:
         action="store_true",
         help="do not read or write compiled programs in the persistent compilation cache "
         "($JAXRB_CACHE_DIR, default ~/.cache/jaxrb/jax), which makes a second run of the "
-        "same kind of scene start quicker",
+        "same kind of scene start quicker; the files used longest ago are removed when it "
+        "holds more than $JAXRB_CACHE_MAX_MB megabytes (default 1024)",
     )
 
 
