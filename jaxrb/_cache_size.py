@@ -20,6 +20,7 @@ and jaxrb then compile that program again.
 """
 
 import os
+import stat
 import time
 from pathlib import Path
 
@@ -76,7 +77,7 @@ def _entries(directory: Path) -> list[tuple[float, int, list[Path]]]:
                 st = path.stat()
             except OSError:  # removed meanwhile by another process
                 continue
-            if not path.is_file():
+            if not stat.S_ISREG(st.st_mode):  # a folder (`programs`) or another kind
                 continue
             files, used = [path], max(st.st_atime, st.st_mtime)
             if name.endswith(".tmp"):
