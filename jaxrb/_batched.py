@@ -173,7 +173,13 @@ def _solve_part(scene, states0, ts, settings, batched_scene):
     # flags every member, and a unit inertia stands in for its own. So the mask, 15 % of
     # B1's batched solve, is left out there.
     masked = batched_scene or coords is not ROTATION
-    rates_scene = scene if masked else _unit_inertia_unless(jnp.any(valid), scene)
+    if masked:
+        rates_scene = scene
+    else:  # J^-1 once, before the solve: XLA leaves loop-invariant code in the loop on a CPU
+        rates_scene = _unit_inertia_unless(jnp.any(valid), scene)
+        rates_scene = eqx.tree_at(
+            lambda s: s.body, rates_scene, rates_scene.body.with_inertia_inverse()
+        )
 
     def member_rates(scene_, t, y, state0, ok):
         rates = coords.rates(scene_, t, y, state0)

@@ -27,7 +27,9 @@ class RigidBody(eqx.Module):
       the shape's centre: give `inertia` for a shape with an `offset`).
 
     `inertia_inverse` is None unless `with_inertia_inverse()` cached J^-1 (the contact engine
-    does, once per simulation, instead of inverting J at every evaluation of the equations).
+    and the batched free rotation do, once per simulation, instead of inverting J at every
+    evaluation of the equations): the full 3x3 tensor, or for principal moments their
+    reciprocals (shape (3,)).
 
     `mass` and `inertia` are array leaves: differentiate or vmap over them freely. Concrete
     values are validated on construction (mass > 0, finite; inertia symmetric, positive
@@ -80,19 +82,21 @@ class RigidBody(eqx.Module):
     def with_inertia_inverse(self) -> "RigidBody":
         """This body with J^-1 (kg^-1 m^-2, body axes) cached in `inertia_inverse`: inverted
         once here, where the caller's program would otherwise invert J at every evaluation.
-        Only for a body whose `inertia` is not changed afterwards (the cache would be stale)."""
-        if self.principal:
-            return self
-        inverse = inverse3(self.inertia)
+        Only for a body whose `inertia` is not changed afterwards (the cache would be stale).
+        Principal moments cache their reciprocals 1 / J_i (3,)."""
+        inverse = 1.0 / self.inertia if self.principal else inverse3(self.inertia)
         return eqx.tree_at(lambda b: b.inertia_inverse, self, inverse, is_leaf=lambda x: x is None)
 
     @property
     def inertia_matrix_inverse(self) -> Mat3:
         """J^-1 as a full 3x3 tensor (kg^-1 m^-2, body axes): the cached `inertia_inverse`
         if there is one, else inverted here."""
-        if self.inertia_inverse is not None:
-            return self.inertia_inverse
-        return inverse3(self.inertia_matrix)
+        if self.inertia_inverse is None:
+            return inverse3(self.inertia_matrix)
+        if self.principal:
+            inverse = self.inertia_inverse
+            return inverse[..., :, None] * jnp.eye(3, dtype=inverse.dtype)
+        return self.inertia_inverse
 
     @property
     def inertia_matrix(self) -> Mat3:

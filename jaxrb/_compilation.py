@@ -9,6 +9,15 @@ program's entry point (the `jaxrb` command line calls it, and so can a script or
   jaxrb's contact programs (tens of thousands of small operations) they compile in about
   four fifths of the time and run no slower (measured on a 2-core x86 CPU: a die's
   program 55 s -> 43 s of compile CPU time, its 16 s throw about 0.23 s either way);
+- on the CPU, without XLA's pass that hoists loop-invariant code out of while loops
+  (`--xla_disable_hlo_passes=while-loop-invariant-code-motion`): in a contact program's
+  loops nested three deep (a fit's iterations, the passes between events, the solver's
+  steps) it cost the most compile time of any pass, and hoisting gained nothing at run time
+  (a 2-core x86 CPU: `fit_contact`'s program compiled in 21 s instead of 30-34 s, the
+  default die scene in 10.2 s instead of 11.2-12.1 s, and B4's die ran in 19-20 ms
+  instead of 23-28 ms; B1's batched free bodies ran as fast either way). Left out where an
+  accelerator may run the programs (an accelerator plugin installed and `JAX_PLATFORMS`
+  not `cpu`), where it has not been measured;
 - optionally (`nan_checks`), equinox's run-time checks without host callbacks, so that
   derivative programs compiled by the caller's own `jax.jit` can be cached too;
 - jaxrb's traced programs (`programs`): the persistent cache still needs every program
@@ -19,7 +28,10 @@ program's entry point (the `jaxrb` command line calls it, and so can a script or
   more (`jaxrb._cache_size`).
 """
 
+import importlib.metadata
+import importlib.util
 import os
+import pkgutil
 import sys
 from pathlib import Path
 
@@ -29,6 +41,7 @@ from ._cache_size import cache_max_bytes, prune_cache
 from ._persistent import keep_programs
 
 CPU_FLAG = "--xla_cpu_use_fusion_emitters=false"
+LOOP_HOISTING_FLAG = "--xla_disable_hlo_passes=while-loop-invariant-code-motion"
 
 
 def default_cache_dir() -> Path:
@@ -52,6 +65,33 @@ def _backend_started() -> bool:
     return bool(xla_bridge._backends)
 
 
+def _cpu_only() -> bool:
+    """Whether JAX will run on the CPU alone: `JAX_PLATFORMS` is `cpu`, or it is unset and
+    no accelerator plugin (CUDA, ROCm, TPU) is installed."""
+    platforms = (jax.config.jax_platforms or "").strip().lower()
+    if platforms:
+        return platforms == "cpu"
+    try:
+        import jax_plugins
+    except ImportError:
+        plugins = []
+    else:
+        plugins = list(pkgutil.iter_modules(jax_plugins.__path__))
+    entry = list(importlib.metadata.entry_points(group="jax_plugins"))
+    return not plugins and not entry and importlib.util.find_spec("libtpu") is None
+
+
+def cpu_compiler_flags(flags: str, cpu_only: bool) -> str:
+    """`flags` (an `XLA_FLAGS` value) with the CPU settings of the module docstring added,
+    each unless `flags` already sets that option; the loop pass only if `cpu_only`."""
+    added = []
+    if "xla_cpu_use_fusion_emitters" not in flags:
+        added.append(CPU_FLAG)
+    if cpu_only and "xla_disable_hlo_passes" not in flags:
+        added.append(LOOP_HOISTING_FLAG)
+    return " ".join([flags.strip(), *added]).strip()
+
+
 def speed_up_compilation(
     cache: bool = True,
     cache_dir=None,
@@ -64,7 +104,9 @@ def speed_up_compilation(
     `default_cache_dir()`; a contact scene's program takes 0.5-2 MB there, an eager
     operation's a few kB, its size is bounded by `max_cache_mb` below, and the directory can
     be deleted at any time), and, if JAX has not started its CPU backend yet and `XLA_FLAGS`
-    does not choose otherwise, the quicker CPU kernel emitters. Changes process-wide
+    does not choose otherwise, the CPU compiler settings that compile jaxrb's programs
+    fastest (the quicker kernel emitters and, where only the CPU runs programs, no hoisting
+    of loop-invariant code; module docstring). Changes process-wide
     settings: call it once at the start of a program. Returns the cache directory (None
     without a cache).
 
@@ -103,9 +145,9 @@ def speed_up_compilation(
 
         if equinox_checks_mode() == "raise":
             set_equinox_checks("nan")
-    flags = os.environ.get("XLA_FLAGS", "")
-    if "xla_cpu_use_fusion_emitters" not in flags and not _backend_started():
-        os.environ["XLA_FLAGS"] = f"{flags} {CPU_FLAG}".strip()
+    if not _backend_started():
+        flags = os.environ.get("XLA_FLAGS", "")
+        os.environ["XLA_FLAGS"] = cpu_compiler_flags(flags, _cpu_only())
     if not cache:
         keep_programs(False)
         return None

@@ -77,10 +77,13 @@ class _Rotation(eqx.Module):
         quat, omega = y
         body = scene.body
         inertia = body.inertia.astype(omega.dtype)
+        inverse = body.inertia_inverse  # cached by the caller (once, not at every stage)
         if body.principal:
-            omega_dot = -jnp.cross(omega, inertia[:, None] * omega, axis=0) / inertia[:, None]
+            inverse = (1.0 / inertia if inverse is None else inverse.astype(omega.dtype))[:, None]
+            omega_dot = -jnp.cross(omega, inertia[:, None] * omega, axis=0) * inverse
         else:
-            omega_dot = -(inverse3(inertia) @ jnp.cross(omega, inertia @ omega, axis=0))
+            inverse = inverse3(inertia) if inverse is None else inverse.astype(omega.dtype)
+            omega_dot = -(inverse @ jnp.cross(omega, inertia @ omega, axis=0))
         q0, q1, q2, q3 = quat
         w1, w2, w3 = omega
         quat_dot = 0.5 * jnp.stack(  # q (x) (0, omega), as `quat_rate`

@@ -38,7 +38,7 @@ os.environ["JAXRB_PROGRAM_SOURCES"] = os.pathsep.join(_SOURCES)
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_dtype_promotion", "strict")
-jaxrb.speed_up_compilation(cache_dir=_CACHE, program_sources=_SOURCES)  # + quicker CPU emitters
+jaxrb.speed_up_compilation(cache_dir=_CACHE, program_sources=_SOURCES)  # + CPU compiler settings
 
 
 @pytest.fixture(autouse=True, scope="module")

@@ -1,0 +1,101 @@
+"""The CPU compiler settings of `speed_up_compilation`: which flags it adds, that it leaves a
+user's own choices alone, and that XLA honours the loop pass it turns off."""
+
+import os
+import re
+import subprocess
+import sys
+
+from jaxrb._compilation import CPU_FLAG, LOOP_HOISTING_FLAG, cpu_compiler_flags
+
+
+def test_both_cpu_flags_added_where_only_the_cpu_runs():
+    assert cpu_compiler_flags("", cpu_only=True) == f"{CPU_FLAG} {LOOP_HOISTING_FLAG}"
+    assert cpu_compiler_flags(" --xla_foo=1 ", cpu_only=True).split() == [
+        "--xla_foo=1",
+        CPU_FLAG,
+        LOOP_HOISTING_FLAG,
+    ]
+
+
+def test_loop_pass_kept_where_an_accelerator_may_run():
+    assert cpu_compiler_flags("", cpu_only=False) == CPU_FLAG
+
+
+def test_a_users_own_choices_are_left_alone():
+    mine = "--xla_cpu_use_fusion_emitters=true --xla_disable_hlo_passes=algsimp"
+    assert cpu_compiler_flags(mine, cpu_only=True) == mine
+
+
+# In a process of its own: `speed_up_compilation` changes `XLA_FLAGS` before JAX starts its
+# backend. A loop whose body computes sin(a) from an argument `a` that does not change in the
+# loop: XLA's hoisting pass moves the sine out of the loop; with the pass off it stays in the
+# loop's body. Prints the flags and whether the body (or a computation it calls) holds it.
+_PROBE = """
+import re, sys
+import jax, jax.numpy as jnp
+import jaxrb
+if sys.argv[1] == "on":
+    jaxrb.speed_up_compilation(cache=False)
+import os
+print(os.environ.get("XLA_FLAGS", ""))
+f = lambda a, x: jax.lax.fori_loop(0, 5, lambda i, y: y + jnp.sin(a), x)
+text = jax.jit(f).lower(jnp.ones(8), jnp.ones(8)).compile().as_text()
+blocks = {}
+for block in re.split(r"\\n(?=\\S)", text):
+    head = re.match(r"(?:ENTRY )?%?([\\w.\\-]+)", block)
+    if head:
+        blocks[head.group(1)] = block
+(body,) = re.findall(r"while\\(.*body=%?([\\w.\\-]+)", text)
+seen, todo = set(), [body]
+while todo:
+    name = todo.pop()
+    if name in seen or name not in blocks:
+        continue
+    seen.add(name)
+    todo += re.findall(r"(?:calls|to_apply|body|condition)=%?([\\w.\\-]+)", blocks[name])
+print("sine in loop" if any(" sine(" in blocks[n] for n in seen) else "sine hoisted")
+"""
+
+
+def _probe(mode):
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    env["JAX_PLATFORMS"] = "cpu"
+    out = subprocess.run(
+        [sys.executable, "-c", _PROBE, mode],
+        env=env,
+        check=True,
+        timeout=120,
+        capture_output=True,
+        text=True,
+    ).stdout.splitlines()
+    return out[-2], out[-1]
+
+
+def test_speed_up_compilation_turns_off_loop_hoisting_on_the_cpu():
+    flags, where = _probe("on")
+    assert CPU_FLAG in flags.split() and LOOP_HOISTING_FLAG in flags.split()
+    assert where == "sine in loop"
+    # the probe can tell: without the setting XLA hoists the sine
+    flags, where = _probe("off")
+    assert not re.search("xla_disable_hlo_passes", flags)
+    assert where == "sine hoisted"
+
+
+def test_loop_pass_left_on_where_jax_platforms_names_an_accelerator():
+    """JAX_PLATFORMS=cuda on this machine: JAX never starts (nothing is computed), but the
+    setting must not reach the programs an accelerator would compile."""
+    code = (
+        "import os, jaxrb; jaxrb.speed_up_compilation(cache=False); print(os.environ['XLA_FLAGS'])"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    env["JAX_PLATFORMS"] = "cuda"
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        env=env,
+        check=True,
+        timeout=120,
+        capture_output=True,
+        text=True,
+    )
+    assert out.stdout.split() == [CPU_FLAG]
