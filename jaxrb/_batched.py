@@ -28,6 +28,7 @@ from ._coordinates import ROTATION, coordinates_for
 from ._inputs import check_concrete_inputs, input_result, safe_times
 from ._persistent import entry_point
 from ._results import RESULTS, raise_if_failed
+from ._scene import with_inertia_inverse
 from ._solve import DEFAULT_MAX_STEPS, default_solver, solve
 from ._solver_settings import solver_settings
 from ._state import State
@@ -176,10 +177,7 @@ def _solve_part(scene, states0, ts, settings, batched_scene):
     if masked:
         rates_scene = scene
     else:  # J^-1 once, before the solve: XLA leaves loop-invariant code in the loop on a CPU
-        rates_scene = _unit_inertia_unless(jnp.any(valid), scene)
-        rates_scene = eqx.tree_at(
-            lambda s: s.body, rates_scene, rates_scene.body.with_inertia_inverse()
-        )
+        rates_scene = with_inertia_inverse(_unit_inertia_unless(jnp.any(valid), scene))
 
     def member_rates(scene_, t, y, state0, ok):
         rates = coords.rates(scene_, t, y, state0)

@@ -39,3 +39,9 @@ class Scene(eqx.Module):
             )
         if self.floor is not None and self.joint is not None:
             raise ValueError("a scene may have a floor or a joint, not both")
+
+
+def with_inertia_inverse(scene: Scene) -> Scene:
+    """`scene` with its body's J^-1 computed once (`RigidBody.with_inertia_inverse`), not in
+    every evaluation of the equations inside the solver's loops."""
+    return eqx.tree_at(lambda s: s.body, scene, scene.body.with_inertia_inverse())

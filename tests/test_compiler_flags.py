@@ -58,17 +58,23 @@ print("sine in loop" if any(" sine(" in blocks[n] for n in seen) else "sine hois
 """
 
 
-def _probe(mode):
+def _python(code, platforms, *args):
+    """The standard output of `code` run by a new interpreter with `JAX_PLATFORMS=platforms`
+    and no `XLA_FLAGS` of the suite's."""
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
-    env["JAX_PLATFORMS"] = "cpu"
-    out = subprocess.run(
-        [sys.executable, "-c", _PROBE, mode],
+    env["JAX_PLATFORMS"] = platforms
+    return subprocess.run(
+        [sys.executable, "-c", code, *args],
         env=env,
         check=True,
         timeout=120,
         capture_output=True,
         text=True,
-    ).stdout.splitlines()
+    ).stdout
+
+
+def _probe(mode):
+    out = _python(_PROBE, "cpu", mode).splitlines()
     return out[-2], out[-1]
 
 
@@ -88,14 +94,4 @@ def test_loop_pass_left_on_where_jax_platforms_names_an_accelerator():
     code = (
         "import os, jaxrb; jaxrb.speed_up_compilation(cache=False); print(os.environ['XLA_FLAGS'])"
     )
-    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
-    env["JAX_PLATFORMS"] = "cuda"
-    out = subprocess.run(
-        [sys.executable, "-c", code],
-        env=env,
-        check=True,
-        timeout=120,
-        capture_output=True,
-        text=True,
-    )
-    assert out.stdout.split() == [CPU_FLAG]
+    assert _python(code, "cuda").split() == [CPU_FLAG]

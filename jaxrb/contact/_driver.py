@@ -20,6 +20,7 @@ from .._inputs import input_result, safe_times
 from .._persistent import entry_point
 from .._quaternion import quat_normalize
 from .._results import RESULTS, raise_if_failed
+from .._scene import with_inertia_inverse
 from .._shapes import Sphere
 from .._solve import checks_without_host_callbacks
 from .._solver_settings import SolverSettings
@@ -407,12 +408,6 @@ def contact_program(scene, settings, options, tol) -> ContactProgram:
     )
     settings = eqx.tree_at(lambda s: s.controller, settings, controller)
     return ContactProgram(model, settings, options, tol)
-
-
-def with_inertia_inverse(scene):
-    """`scene` with its body's J^-1 computed once (`RigidBody.with_inertia_inverse`), not in
-    every evaluation of the equations inside the loops."""
-    return eqx.tree_at(lambda s: s.body, scene, scene.body.with_inertia_inverse())
 
 
 @entry_point

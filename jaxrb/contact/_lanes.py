@@ -25,9 +25,10 @@ import jax.numpy as jnp
 from .._checks import as_float_array
 from .._inputs import save_times
 from .._persistent import entry_point
+from .._scene import with_inertia_inverse
 from .._solver_settings import solver_settings
 from .._state import State
-from ._driver import check_contact_scene, contact_program, run_throw, with_inertia_inverse
+from ._driver import check_contact_scene, contact_program, run_throw
 from ._options import ContactOptions
 
 DEFAULT_LANES = 64  # on a GPU
