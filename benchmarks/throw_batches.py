@@ -10,7 +10,9 @@ U(-30, 30) rad/s per body axis and horizontal speed U(-0.5, 0.5) m/s; T = 5 s, 1
 - vmap: `jax.jit(jax.vmap(jaxrb.simulate))` over the batch (every member runs as many passes
   as the longest throw);
 - lanes L: `jaxrb.simulate_throws` with L lanes refilled as throws finish; "default" is its
-  default lane count (`jaxrb.contact.default_lanes`: 1 on a CPU, 64 on a GPU).
+  default lane count (`jaxrb.contact.default_lanes`: 1 on a CPU, 64 on a GPU). One lane on
+  a CPU splits the throws over the CPU devices, and the benchmarks start JAX with one per
+  core (`benchmarks/__init__.py`); the loop and vmap run on the first.
 
 The table gives the steady wall time per die (the second call), the first call minus the
 steady one (compile), and how many dice keep the loop's impact count (a die's landing is

@@ -21,8 +21,7 @@ from ._solver_settings import solver_settings
 from ._state import State
 from ._trajectory import Trajectory
 from .contact import ContactOptions
-from .contact._driver import simulate_contact
-from .contact._lanes import one_after_another
+from .contact._driver import simulate_contact, simulate_contact_members
 
 
 def _coordinates(scene):
@@ -144,8 +143,10 @@ def simulate(
     scene with a floor runs the contact engine per member: on a CPU one member after
     another (`jax.lax.map`, the cheapest there; `jax.vmap(simulate)` runs every member for
     as many events as the busiest one, at 3-5x the cost per die in benchmarks/README.md),
-    elsewhere side by side (`jax.vmap`). To split a batch over several devices, or to give
-    each member its own scene parameters, use `jaxrb.simulate_batch`.
+    elsewhere side by side (`jax.vmap`), in one compiled program that a later call with the
+    same shapes reuses. To split a batch of throws over several CPU devices (not
+    differentiable) use `jaxrb.simulate_throws`; a free body's batch over several devices,
+    or with its own scene parameters per member: `jaxrb.simulate_batch`.
 
     Quaternion-norm policy: the right-hand side normalises q before rotating vectors, the
     kinematics preserve |q| up to the solver's error, and saved quaternions are normalised;
@@ -177,10 +178,9 @@ def simulate(
     if scene.floor is not None:
         contact = ContactOptions.from_shortcuts(contact, max_impacts, rest_speed)
 
-        def one(s):
-            return simulate_contact(scene, s, ts, settings, throw=throw, options=contact)
-
-        return one(state0) if n_batch is None else _contact_members(one, state0)
+        if n_batch is None:
+            return simulate_contact(scene, state0, ts, settings, throw=throw, options=contact)
+        return simulate_contact_members(scene, state0, ts, settings, throw=throw, options=contact)
     state0 = jax.tree.map(lambda x: jnp.asarray(x, ts.dtype), state0)
     if n_batch is None:
         traj = _simulate_smooth(scene, state0, ts, settings)
@@ -200,20 +200,6 @@ def batch_controller(controller):
     if isinstance(controller, dfx.PIDController) and controller.norm is optx.rms_norm:
         return eqx.tree_at(lambda c: c.norm, controller, batch_rms_norm)
     return controller
-
-
-def _contact_members(fn, states0):
-    """`fn` (one body's `simulate` with a floor) mapped over the batch; `ts` returned once.
-
-    On a CPU the members run one after another (`jax.lax.map`): each runs only its own
-    events and steps, which costs the least there (about a loop of `simulate` over them,
-    in one call). Elsewhere they run side by side (`jax.vmap`), every member for as many
-    passes as the one with the most events."""
-    if one_after_another():
-        traj = jax.lax.map(fn, states0)
-    else:
-        traj = jax.vmap(fn)(states0)
-    return eqx.tree_at(lambda t: t.ts, traj, traj.ts[0])
 
 
 @entry_point

@@ -415,6 +415,38 @@ def _simulate_contact(scene, state0, ts, settings, options, tol, loop_kind):
     return run_throw(with_inertia_inverse(scene), state0, ts, settings, options, tol, loop_kind)
 
 
+def simulate_contact_members(scene, states0, ts, settings, *, throw, options) -> Trajectory:
+    """`jaxrb.simulate` for a scene with a floor and a batch of states (a leading axis N on
+    every leaf of `states0`): each member runs the one-body program, on a CPU one after
+    another (`jax.lax.map`: each runs only its own events and steps, about a loop of
+    `simulate` over them in one call), elsewhere side by side (`jax.vmap`: every member for
+    as many passes as the one with the most events). One compiled entry point, so that a
+    later call with the same shapes and settings neither traces nor compiles again."""
+    check_contact_scene(scene, options)
+    ts = jnp.asarray(ts)
+    states0 = jax.tree.map(lambda x: jnp.asarray(x, ts.dtype), states0)
+    tol = options.resolved(ts.dtype)
+    kind = "lax" if isinstance(settings.adjoint, dfx.ForwardMode) else "checkpointed"
+    with checks_without_host_callbacks():
+        traj = _simulate_contact_members(scene, states0, ts, settings, options, tol, kind)
+    if throw:  # a member that starts below the floor is flagged in its result code
+        traj = raise_if_failed(traj)
+    return traj
+
+
+@entry_point
+def _simulate_contact_members(scene, states0, ts, settings, options, tol, loop_kind):
+    from ._lanes import one_after_another
+
+    scene = with_inertia_inverse(scene)
+
+    def one(state0):
+        return run_throw(scene, state0, ts, settings, options, tol, loop_kind)
+
+    traj = jax.lax.map(one, states0) if one_after_another() else jax.vmap(one)(states0)
+    return eqx.tree_at(lambda t: t.ts, traj, ts)
+
+
 def run_throw(scene, state0, ts, settings, options, tol, loop_kind) -> Trajectory:
     """One throw's passes (the start, then one per event) in a loop of the `loop_kind`
     ("lax" or "checkpointed"), and its `Trajectory`; traced inside an entry point."""

@@ -11,7 +11,9 @@ events costs few passes. Each lane runs exactly the passes of `jaxrb.simulate` (
 
 With one lane (the default on a CPU) the throws run one after another, each through the
 program `simulate` compiles for one throw (`run_throw`), in a `jax.lax.map`: on a CPU that
-costs the least per throw, and it compiles what a single `simulate` compiles. On a CPU a
+costs the least per throw, and it compiles what a single `simulate` compiles. Where the
+process has several CPU devices the throws are split over them (`map_throws`), each device
+running its share on a core of its own. On a CPU a
 batch gains little from running lanes side by side, since each of the program's many small
 operations costs about the same for a few lanes as for one, while a batch does the work
 that any one lane needs (an impact, a search for a slip direction) for all of them.
@@ -21,6 +23,8 @@ import diffrax as dfx
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
+from jax.sharding import Mesh, PartitionSpec
 
 from .._checks import as_float_array
 from .._inputs import save_times
@@ -40,6 +44,34 @@ def one_after_another() -> bool:
     per throw, side by side costs more). `default_lanes` and `simulate` of a batch of
     states with a floor follow it."""
     return jax.default_backend() == "cpu"
+
+
+def map_throws(fn, xs):
+    """`jax.lax.map(fn, xs)` (`xs`: a pytree of arrays with a leading axis of N throws), the
+    throws split evenly over the process's CPU devices where there are several (JAX shows
+    K when the process starts with `XLA_FLAGS=--xla_force_host_platform_device_count=K`):
+    each device runs its share one after another, and the devices run side by side, one
+    core each (on a 2-core x86 CPU 16 dice of B4 took 1.4-1.8x less time on two devices than
+    on one). The throws are padded to a multiple of the devices' number with copies of the
+    first, whose results are dropped. Each throw's result is its own `fn`'s, to roundoff."""
+    n = jax.tree.leaves(xs)[0].shape[0]
+    devices = jax.local_devices()
+    k = min(len(devices), n)
+    if k <= 1 or devices[0].platform != "cpu":
+        return jax.lax.map(fn, xs)
+    pad = -n % k
+    padded = jax.tree.map(
+        lambda x: jnp.concatenate([x, jnp.broadcast_to(x[:1], (pad,) + x.shape[1:])]), xs
+    )
+    mesh = Mesh(np.array(devices[:k]), ("throws",))
+    run = jax.shard_map(
+        lambda part: jax.lax.map(fn, part),
+        mesh=mesh,
+        in_specs=PartitionSpec("throws"),
+        out_specs=PartitionSpec("throws"),
+        check_vma=False,
+    )
+    return jax.tree.map(lambda x: x[:n], run(padded))
 
 
 def default_lanes(n: int) -> int:
@@ -78,7 +110,9 @@ def simulate_throws(
     - `ts`: increasing save times (s), shape (T,), shared by every throw.
     - `lanes`: how many throws run at once (default `default_lanes(N)`: 1 on a CPU,
       `min(N, 64)` on a GPU). More lanes use a GPU's threads; on a CPU one lane, the throws
-      one after another, costs the least (module docstring).
+      one after another, costs the least (module docstring), and with several CPU devices
+      (`XLA_FLAGS=--xla_force_host_platform_device_count=K` set before JAX starts) the
+      throws are split over them, one core each.
     - `solver`, `rtol`, `atol`, `dt0`, `max_steps`, `stepsize_controller`, `max_impacts`,
       `rest_speed`, `contact`: as in `jaxrb.simulate`.
 
@@ -161,7 +195,7 @@ def _throws(scene, states0, ts, settings, options, tol, lanes, batched_scene):
             state0 = jax.tree.map(lambda x: x[i], states0)
             return run_throw(scene_of(i), state0, ts, settings, options, tol, "lax")
 
-        return jax.lax.map(one, jnp.arange(n))
+        return map_throws(one, jnp.arange(n))
 
     first = jnp.arange(lanes)
     carries = jax.vmap(start)(first)
