@@ -21,7 +21,7 @@ from ._solver_settings import solver_settings
 from ._state import State
 from ._trajectory import Trajectory
 from .contact import ContactOptions
-from .contact._driver import simulate_contact, simulate_contact_members
+from .contact._driver import simulate_contact
 
 
 def _coordinates(scene):
@@ -178,9 +178,9 @@ def simulate(
     if scene.floor is not None:
         contact = ContactOptions.from_shortcuts(contact, max_impacts, rest_speed)
 
-        if n_batch is None:
-            return simulate_contact(scene, state0, ts, settings, throw=throw, options=contact)
-        return simulate_contact_members(scene, state0, ts, settings, throw=throw, options=contact)
+        return simulate_contact(
+            scene, state0, ts, settings, throw=throw, options=contact, members=n_batch is not None
+        )
     state0 = jax.tree.map(lambda x: jnp.asarray(x, ts.dtype), state0)
     if n_batch is None:
         traj = _simulate_smooth(scene, state0, ts, settings)

@@ -100,16 +100,18 @@ def check_contact_scene(scene, options) -> None:
         raise TypeError(f"options must be a ContactOptions, got {type(options).__name__}")
 
 
-def simulate_contact(scene, state0, ts, settings, *, throw, options) -> Trajectory:
+def simulate_contact(scene, state0, ts, settings, *, throw, options, members=False):
     """`jaxrb.simulate` for a scene with a floor, with the `SolverSettings` `settings` (each
     smooth segment is one solve with them; the progress meter is not used). `options` is a
-    `ContactOptions`."""
+    `ContactOptions`. With `members`, `state0` is a batch (a leading axis N on every leaf),
+    each member running the one-body program (`_simulate_contact_members`); a member that
+    starts below the floor is then flagged in its result code."""
     check_contact_scene(scene, options)
     ts = jnp.asarray(ts)
     state0 = jax.tree.map(lambda x: jnp.asarray(x, ts.dtype), state0)
     tol = options.resolved(ts.dtype)
     concrete = all(is_concrete(x) for x in (*jax.tree.leaves(state0), *jax.tree.leaves(scene)))
-    if throw and concrete:
+    if throw and concrete and not members:
         d0 = float(
             scene.floor.body_distance(scene.body.shape, state0.pos, quat_normalize(state0.quat))
         )
@@ -122,8 +124,9 @@ def simulate_contact(scene, state0, ts, settings, *, throw, options) -> Trajecto
     # also around the call: under jax.grad / jacfwd JAX differentiates the compiled
     # program's jaxpr here, tracing the derivative of each event time's root find (a linear
     # solve with its own check) only now
+    program = _simulate_contact_members if members else _simulate_contact
     with checks_without_host_callbacks():
-        traj = _simulate_contact(scene, state0, ts, settings, options, tol, kind)
+        traj = program(scene, state0, ts, settings, options, tol, kind)
     if throw:  # outside the compiled program: throw=True and False share one compilation
         traj = raise_if_failed(traj)
     return traj
@@ -415,28 +418,14 @@ def _simulate_contact(scene, state0, ts, settings, options, tol, loop_kind):
     return run_throw(with_inertia_inverse(scene), state0, ts, settings, options, tol, loop_kind)
 
 
-def simulate_contact_members(scene, states0, ts, settings, *, throw, options) -> Trajectory:
-    """`jaxrb.simulate` for a scene with a floor and a batch of states (a leading axis N on
-    every leaf of `states0`): each member runs the one-body program, on a CPU one after
-    another (`jax.lax.map`: each runs only its own events and steps, about a loop of
-    `simulate` over them in one call), elsewhere side by side (`jax.vmap`: every member for
-    as many passes as the one with the most events). One compiled entry point, so that a
-    later call with the same shapes and settings neither traces nor compiles again."""
-    check_contact_scene(scene, options)
-    ts = jnp.asarray(ts)
-    states0 = jax.tree.map(lambda x: jnp.asarray(x, ts.dtype), states0)
-    tol = options.resolved(ts.dtype)
-    kind = "lax" if isinstance(settings.adjoint, dfx.ForwardMode) else "checkpointed"
-    with checks_without_host_callbacks():
-        traj = _simulate_contact_members(scene, states0, ts, settings, options, tol, kind)
-    if throw:  # a member that starts below the floor is flagged in its result code
-        traj = raise_if_failed(traj)
-    return traj
-
-
 @entry_point
 def _simulate_contact_members(scene, states0, ts, settings, options, tol, loop_kind):
-    from ._lanes import one_after_another
+    """A batch's members, each through `run_throw`: on a CPU one after another
+    (`jax.lax.map`: each runs only its own events and steps, about a loop of `simulate`
+    over them in one call), elsewhere side by side (`jax.vmap`: every member for as many
+    passes as the one with the most events). One compiled entry point, so that a later call
+    with the same shapes and settings neither traces nor compiles again."""
+    from ._lanes import one_after_another  # _lanes imports this module
 
     scene = with_inertia_inverse(scene)
 
