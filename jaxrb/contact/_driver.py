@@ -40,13 +40,15 @@ from ._modes import (
     flat,
     flight_mode,
     mode_rates,
+    no_derivative,
     solve_mode,
     unflat,
     unit_state,
 )
 from ._options import ContactOptions
 from ._record import ContactLog, add_impact, empty_impacts
-from ._step_limit import gap_step_limit, limited, step_limit_of
+from ._step_end import CarryingSolver, carried_event_value, carried_rates
+from ._step_limit import limited, step_limit_of
 from ._transition import at_event
 
 
@@ -134,13 +136,12 @@ def simulate_contact(scene, state0, ts, settings, *, throw, options, members=Fal
 
 class _Segment(eqx.Module):
     """The arguments of a segment's right-hand side, event function and step limit: the
-    scene, the segment's mode, the shifts of its conditions, the step limit at its start
-    (s), and whether the body moves (False: a finished member of a batch, held still)."""
+    scene, the segment's mode, the shifts of its conditions, and whether the body moves
+    (False: a finished member of a batch, held still)."""
 
     scene: object
     mode: object
     offsets: jax.Array
-    limit0: jax.Array
     moving: jax.Array
 
 
@@ -268,8 +269,13 @@ class ContactProgram(eqx.Module):
         mode = jax.tree.map(lambda a, b: jnp.where(moves_on, a, b), out.mode, carry["mode"])
         y = jax.tree.map(lambda a, b: jnp.where(moves_on, a, b), out.state, carry["y"])
         start = solve_mode(t0, unit_state(y), mode, scene, model, tol)
-        offsets = start_offsets(conditions(start, mode, model, scene, tol), cond_tol)
-        limit0 = step_limit_of(start, mode, offsets, model, tol)
+        values0 = conditions(start, mode, model, scene, tol)
+        offsets = start_offsets(values0, cond_tol)
+        # the event function and the step limit at the start, carried beside the state
+        # (`_step_end.py`)
+        carried0 = jnp.stack(
+            [jnp.min(values0 + offsets), step_limit_of(start, mode, offsets, model, tol)]
+        )
         done = done | too_many | paradox
         # a finished member (of a vmapped batch) is held still over a last sliver
         # [t_end - idle, t_end], whose result is discarded: its saves, all at t_end, are
@@ -280,28 +286,38 @@ class ContactProgram(eqx.Module):
         idle = 64 * jnp.finfo(ts.dtype).eps * jnp.maximum(jnp.abs(t_end), 1.0)
         t0 = jnp.where(done, t_end - idle, t0)
         settings = self.settings
+        args = _Segment(scene, mode, offsets, ~done)
+        at_step_end, condition = _step_end_functions(model, tol)
+        state_only = lambda t, y, args: y[0]  # noqa: E731
         with checks_without_host_callbacks():
             sol = dfx.diffeqsolve(
                 dfx.ODETerm(
-                    traced_once(
-                        lambda t, y, args: jnp.where(
-                            args.moving, mode_rates(t, y, args.mode, args.scene, model, tol), 0.0
+                    carried_rates(
+                        traced_once(
+                            lambda t, x, args: jnp.where(
+                                args.moving,
+                                mode_rates(t, x, args.mode, args.scene, model, tol),
+                                0.0,
+                            )
                         )
                     )
                 ),
-                settings.solver,
+                CarryingSolver(settings.solver, args, at_step_end, condition),
                 t0=t0,
                 t1=t_end,
                 dt0=settings.dt0,
-                y0=flat(y),
-                args=_Segment(scene, mode, offsets, limit0, ~done),
+                y0=(flat(y), carried0.astype(ts.dtype)),
+                args=args,
                 saveat=dfx.SaveAt(
-                    subs=[dfx.SubSaveAt(ts=jnp.clip(ts, t0, t_end)), dfx.SubSaveAt(t1=True)]
+                    subs=[
+                        dfx.SubSaveAt(ts=jnp.clip(ts, t0, t_end), fn=state_only),
+                        dfx.SubSaveAt(t1=True, fn=state_only),
+                    ]
                 ),
                 stepsize_controller=settings.controller,
                 adjoint=settings.adjoint,
                 max_steps=settings.max_steps,
-                event=_event(model, tol),
+                event=_event(tol),
                 throw=False,
             )
         t_stop = sol.ts[1][0]
@@ -375,40 +391,44 @@ class ContactProgram(eqx.Module):
         )
 
 
-def _event(model, tol):
-    """A segment's event: the first zero of the minimum of its mode's conditions (shifted
-    by the offsets at its start)."""
+def _step_end_functions(model, tol):
+    """(at_step_end, condition) of `CarryingSolver` for a segment (`_step_end.py`): the
+    event function and the step limit at a step's end, from one solve of the mode, with no
+    derivative; and the event function alone, differentiable, for the root find."""
 
     @traced_once
-    def smallest(t, y, args):  # y: the segment's flat state
-        sol = solve_mode(t, unit_state(unflat(y)), args.mode, args.scene, model, tol)
+    def condition(t, x, args):  # x: the segment's flat state
+        sol = solve_mode(t, unit_state(unflat(x)), args.mode, args.scene, model, tol)
         values = conditions(sol, args.mode, model, args.scene, tol) + args.offsets
-        # in JAX's default float dtype: diffrax compares it with a Python float internally
-        return jnp.min(values).astype(jnp.result_type(float))
+        return jnp.min(values)
 
-    def condition(t, y, args, **kwargs):
-        return smallest(t, y, args)
+    @traced_once
+    def at_step_end(t, x, args):
+        t, x, args = no_derivative((t, x, args))
+        sol = solve_mode(t, unit_state(unflat(x)), args.mode, args.scene, model, tol)
+        values = conditions(sol, args.mode, model, args.scene, tol) + args.offsets
+        limit = step_limit_of(sol, args.mode, args.offsets, model, tol)
+        return jnp.stack([jnp.min(values), limit])
 
+    return at_step_end, condition
+
+
+def _event(tol):
+    """A segment's event: the first zero of the minimum of its mode's conditions (shifted
+    by the offsets at its start), carried in the state at step ends (`_step_end.py`)."""
     # The event fires on a down-crossing only (direction=False): the condition is positive
     # at the bracket's lower end and at most 0 at its upper end, so the root finder knows
     # the orientation. Detecting it, or widening the bracket, would evaluate the condition
     # at extra places: each is another copy of the mode solve in the compiled program.
     root_finder = EventTime(rtol=tol.event, atol=tol.event)
-    return dfx.Event(condition, root_finder=root_finder, direction=False)
+    return dfx.Event(carried_event_value, root_finder=root_finder, direction=False)
 
 
 def contact_program(scene, settings, options, tol) -> ContactProgram:
     """The `ContactProgram` of `scene`'s shape with the `SolverSettings` `settings`; the
     step-size controller learns each segment's step limit."""
     model = contact_model(scene.body.shape, scene.floor.parts)
-    controller = limited(
-        settings.controller,
-        traced_once(
-            lambda t, y, args: gap_step_limit(
-                t, unflat(y), args.mode, args.offsets, args.scene, model, tol
-            )
-        ),
-    )
+    controller = limited(settings.controller)
     settings = eqx.tree_at(lambda s: s.controller, settings, controller)
     return ContactProgram(model, settings, options, tol)
 

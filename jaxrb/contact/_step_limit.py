@@ -27,37 +27,21 @@ its slip turning back and forth, for 10^4 steps.
 """
 
 import diffrax as dfx
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 
 from ._events import mode_slips
-from ._modes import (
-    FACE,
-    FLIGHT,
-    active_points,
-    no_derivative,
-    solve_mode,
-    unit_state,
-)
+from ._modes import FACE, FLIGHT, active_points, no_derivative
+from ._step_end import LIMIT
 
 SHRINK = 0.5  # k: the fraction of a gap a step may close
 STABLE_STEPS = 1.0  # beta h: the longest step in a contact mode, in units of 1 / beta
 
 
-def gap_step_limit(t, y, mode, offsets, scene, model, tol) -> jax.Array:
-    """The largest step (s) from state `y` in `mode` (module docstring); `offsets`: the
-    gap conditions' start shifts (a point whose gap starts at its boundary is not limited:
-    it is the contact the segment began on)."""
-    # no derivative flows through a step size: stop it at the inputs, so that no tangent
-    # of the computation below is traced at all
-    t, y, mode, offsets, scene = no_derivative((t, y, mode, offsets, scene))
-    sol = solve_mode(t, unit_state(y), mode, scene, model, tol)
-    return step_limit_of(sol, mode, offsets, model, tol)
-
-
 def step_limit_of(sol, mode, offsets, model, tol) -> jax.Array:
-    """`gap_step_limit` from the mode's solution `sol` at the state (no derivative)."""
+    """The largest step (s) from the state of the mode's solution `sol` in `mode` (module
+    docstring; no derivative); `offsets`: the gap conditions' start shifts (a point whose
+    gap starts at its boundary is not limited: it is the contact the segment began on)."""
     sol, mode, offsets = no_derivative((sol, mode, offsets))
     geom = sol.geom
     P = model.num_points
@@ -105,26 +89,32 @@ def slip_step_limit(sol, mode, model, tol) -> jax.Array:
 
 
 class GapLimitedSteps(dfx.AbstractStepSizeController):
-    """Wraps the user's step-size controller: every step it proposes is cut to
-    `limit(t, y, args)` (s) from the state the step starts at; the first to `args.limit0`,
-    the limit at the start, which the caller has computed already."""
+    """Wraps the user's step-size controller: every step it proposes is cut to the step
+    limit h carried in the state the step starts from (y = (x, [c, h]), `_step_end.py`);
+    the inner controller sees x alone."""
 
     inner: dfx.AbstractStepSizeController
-    limit: callable = eqx.field(static=True)
 
     def wrap(self, direction):
-        return GapLimitedSteps(self.inner.wrap(direction), self.limit)
+        return type(self)(self.inner.wrap(direction))
 
     def init(self, terms, t0, t1, y0, dt0, args, func, error_order):
-        t_next, state = self.inner.init(terms, t0, t1, y0, dt0, args, func, error_order)
-        return jnp.minimum(t_next, t0 + args.limit0), state
+        x0, values0 = y0
+
+        def func_on_state(terms, t, x, args):
+            return func(terms, t, (x, values0), args)[0]
+
+        t_next, state = self.inner.init(terms, t0, t1, x0, dt0, args, func_on_state, error_order)
+        return jnp.minimum(t_next, t0 + values0[LIMIT]), state
 
     def adapt_step_size(self, t0, t1, y0, y1_candidate, args, y_error, error_order, state):
+        (x0, values0), (x1, values1) = y0, y1_candidate
+        x_error = None if y_error is None else y_error[0]
         keep, next_t0, next_t1, jump, state, result = self.inner.adapt_step_size(
-            t0, t1, y0, y1_candidate, args, y_error, error_order, state
+            t0, t1, x0, x1, args, x_error, error_order, state
         )
-        start = jax.tree.map(lambda a, b: jnp.where(keep, a, b), y1_candidate, y0)
-        next_t1 = jnp.minimum(next_t1, next_t0 + self.limit(next_t0, start, args))
+        limit = jnp.where(keep, values1[LIMIT], values0[LIMIT])
+        next_t1 = jnp.minimum(next_t1, next_t0 + limit)
         return keep, next_t0, next_t1, jump, state, result
 
 
@@ -144,12 +134,9 @@ class GapLimitedAdaptiveSteps(GapLimitedSteps, dfx.AbstractAdaptiveStepSizeContr
     def norm(self):
         return self.inner.norm
 
-    def wrap(self, direction):
-        return GapLimitedAdaptiveSteps(self.inner.wrap(direction), self.limit)
 
-
-def limited(controller, limit):
-    """`controller` with its steps cut to `limit(t, y, args)`."""
+def limited(controller):
+    """`controller` with its steps cut to the carried step limit."""
     if isinstance(controller, dfx.AbstractAdaptiveStepSizeController):
-        return GapLimitedAdaptiveSteps(controller, limit)
-    return GapLimitedSteps(controller, limit)
+        return GapLimitedAdaptiveSteps(controller)
+    return GapLimitedSteps(controller)
