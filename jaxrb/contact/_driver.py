@@ -159,8 +159,7 @@ class ContactProgram(eqx.Module):
 
     def values(self, t, y, mode, scene):
         """The condition vector of `mode` at `y` (docs/contact.md, section 4)."""
-        sol = solve_mode(t, unit_state(y), mode, scene, self.model, self.tol)
-        return conditions(sol, mode, self.model, scene, self.tol)
+        return _solve_with_conditions(t, y, mode, scene, self.model, self.tol)[1]
 
     def start(self, scene, state0, ts) -> dict:
         """The carry of a simulation of `scene` from `state0`, saved at `ts`, before its
@@ -268,14 +267,11 @@ class ContactProgram(eqx.Module):
         moves_on = do & ~paradox
         mode = jax.tree.map(lambda a, b: jnp.where(moves_on, a, b), out.mode, carry["mode"])
         y = jax.tree.map(lambda a, b: jnp.where(moves_on, a, b), out.state, carry["y"])
-        start = solve_mode(t0, unit_state(y), mode, scene, model, tol)
-        values0 = conditions(start, mode, model, scene, tol)
+        start, values0 = _solve_with_conditions(t0, y, mode, scene, model, tol)
         offsets = start_offsets(values0, cond_tol)
         # the event function and the step limit at the start, carried beside the state
         # (`_step_end.py`)
-        carried0 = jnp.stack(
-            [jnp.min(values0 + offsets), step_limit_of(start, mode, offsets, model, tol)]
-        )
+        carried0 = _carried(start, values0, mode, offsets, model, tol)
         done = done | too_many | paradox
         # a finished member (of a vmapped batch) is held still over a last sliver
         # [t_end - idle, t_end], whose result is discarded: its saves, all at t_end, are
@@ -398,19 +394,30 @@ def _step_end_functions(model, tol):
 
     @traced_once
     def condition(t, x, args):  # x: the segment's flat state
-        sol = solve_mode(t, unit_state(unflat(x)), args.mode, args.scene, model, tol)
-        values = conditions(sol, args.mode, model, args.scene, tol) + args.offsets
-        return jnp.min(values)
+        _, values = _solve_with_conditions(t, unflat(x), args.mode, args.scene, model, tol)
+        return jnp.min(values + args.offsets)
 
     @traced_once
     def at_step_end(t, x, args):
         t, x, args = no_derivative((t, x, args))
-        sol = solve_mode(t, unit_state(unflat(x)), args.mode, args.scene, model, tol)
-        values = conditions(sol, args.mode, model, args.scene, tol) + args.offsets
-        limit = step_limit_of(sol, args.mode, args.offsets, model, tol)
-        return jnp.stack([jnp.min(values), limit])
+        sol, values = _solve_with_conditions(t, unflat(x), args.mode, args.scene, model, tol)
+        return _carried(sol, values, args.mode, args.offsets, model, tol)
 
     return at_step_end, condition
+
+
+def _solve_with_conditions(t, y, mode, scene, model, tol):
+    """The solution of `mode` at the state `y` (its quaternion normalised) and the mode's
+    condition vector there (docs/contact.md, section 4)."""
+    sol = solve_mode(t, unit_state(y), mode, scene, model, tol)
+    return sol, conditions(sol, mode, model, scene, tol)
+
+
+def _carried(sol, values, mode, offsets, model, tol):
+    """The values a segment carries beside its state (`_step_end.py`): [c, h], the event
+    function (the smallest condition `values` shifted by `offsets`) and the step limit (s)
+    at the state of the mode's solution `sol`."""
+    return jnp.stack([jnp.min(values + offsets), step_limit_of(sol, mode, offsets, model, tol)])
 
 
 def _event(tol):
