@@ -1,15 +1,22 @@
 """The values a contact segment carries beside its state (`jaxrb/contact/_step_end.py`): the
 solver around the user's leaves the user's solver's steps alone, the event fires where the
-carried event function crosses zero (located on the dense output), and every step is cut to
-the carried step limit."""
+carried event function crosses zero (located on the dense output), the state at the event
+names the condition that ended the run, and every step is cut to the carried step limit."""
 
 import diffrax as dfx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from jaxrb.contact._events import EventTime
-from jaxrb.contact._step_end import CarryingSolver, carried_event_value, carried_rates
+from jaxrb.contact._step_end import (
+    CONDITION,
+    TRIGGER,
+    CarryingSolver,
+    carried_event_value,
+    carried_rates,
+)
 from jaxrb.contact._step_limit import limited
 
 ROOT = EventTime(rtol=1e-12, atol=1e-12)
@@ -20,11 +27,16 @@ def _rates(t, x, args):  # a damped oscillator: x = (position, velocity)
     return jnp.stack([x[1], -x[0] - 0.1 * x[1]])
 
 
-def _condition(t, x, args):  # fires when the position falls through -0.5
-    return x[0] + 0.5
+def _conditions(t, x, args):
+    """Two conditions: the position falls through -0.5 (0), the velocity through `args`."""
+    return jnp.stack([x[0] + 0.5, x[1] - args])
 
 
-def _plain(dtmax):
+def _condition(t, x, args):  # the event function: the smaller condition
+    return jnp.min(_conditions(t, x, args))
+
+
+def _plain(dtmax, v_min=-jnp.inf):
     """The same problem without carried values: the event function evaluated by diffrax."""
     return dfx.diffeqsolve(
         dfx.ODETerm(_rates),
@@ -33,6 +45,7 @@ def _plain(dtmax):
         T_END,
         None,
         jnp.array([1.0, 0.0]),
+        args=v_min,
         stepsize_controller=dfx.PIDController(rtol=1e-8, atol=1e-8, dtmax=dtmax),
         saveat=dfx.SaveAt(t1=True),
         event=dfx.Event(lambda t, y, args, **kw: _condition(t, y, args), ROOT, direction=False),
@@ -40,22 +53,28 @@ def _plain(dtmax):
     )
 
 
-def _carrying(limit):
-    """The problem with [c, h] carried beside the state, h = `limit` (s)."""
+def _carrying(limit, v_min=-jnp.inf, fn=lambda t, y, args: y[0]):
+    """The problem with [c, h] carried beside the state, h = `limit` (s); at an
+    interpolated state [c, k], k the index of the smaller condition."""
 
     def at_step_end(t, x, args):
         return jnp.stack([_condition(t, x, args), jnp.asarray(limit, x.dtype)])
 
+    def condition(t, x, args):
+        values = _conditions(t, x, args)
+        return jnp.stack([jnp.min(values), jnp.argmin(values).astype(x.dtype)])
+
     x0 = jnp.array([1.0, 0.0])
     return dfx.diffeqsolve(
         dfx.ODETerm(carried_rates(_rates)),
-        CarryingSolver(dfx.Tsit5(), None, at_step_end, _condition),
+        CarryingSolver(dfx.Tsit5(), v_min, at_step_end, condition),
         0.0,
         T_END,
         None,
-        (x0, at_step_end(0.0, x0, None)),
+        (x0, at_step_end(0.0, x0, v_min)),
+        args=v_min,
         stepsize_controller=limited(dfx.PIDController(rtol=1e-8, atol=1e-8)),
-        saveat=dfx.SaveAt(t1=True, steps=True, fn=lambda t, y, args: y[0]),
+        saveat=dfx.SaveAt(t1=True, steps=True, fn=fn),
         event=dfx.Event(carried_event_value, ROOT, direction=False),
         max_steps=4096,
     )
@@ -95,3 +114,19 @@ def test_every_step_is_cut_to_the_carried_limit():
     np.testing.assert_allclose(
         np.asarray(carried.ys)[len(ts) - 1], np.asarray(plain.ys[-1]), rtol=0, atol=1e-10
     )
+
+
+@pytest.mark.parametrize("v_min, which", [(-jnp.inf, 0), (-0.8, 1)])
+def test_the_state_at_the_event_names_the_condition_that_ended_the_run(v_min, which):
+    """The state diffrax returns at an event is interpolated at the root: beside it the event
+    function (zero there) and the index of the condition that ended the run, as the contact
+    segment reads its trigger. With the velocity's condition at -0.8 the velocity ends the
+    run before the position reaches -0.5; without it, the position does."""
+    carried = jax.jit(lambda: _carrying(jnp.inf, v_min, fn=lambda t, y, args: y))()
+    plain = jax.jit(lambda: _plain(None, v_min))()
+    last = np.flatnonzero(np.isfinite(np.asarray(carried.ts)))[-1]
+    x_end, values_end = carried.ys[0][last], carried.ys[1][last]
+    assert int(values_end[TRIGGER]) == which
+    np.testing.assert_allclose(float(values_end[CONDITION]), 0.0, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(float(x_end[which]), [-0.5, -0.8][which], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(float(carried.ts[last]), float(plain.ts[-1]), rtol=0, atol=1e-12)

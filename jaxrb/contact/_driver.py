@@ -47,7 +47,7 @@ from ._modes import (
 )
 from ._options import ContactOptions
 from ._record import ContactLog, add_impact, empty_impacts
-from ._step_end import CarryingSolver, carried_event_value, carried_rates
+from ._step_end import TRIGGER, CarryingSolver, carried_event_value, carried_rates
 from ._step_limit import limited, step_limit_of
 from ._transition import at_event
 
@@ -156,10 +156,6 @@ class ContactProgram(eqx.Module):
     settings: SolverSettings
     options: ContactOptions = eqx.field(static=True)
     tol: object = eqx.field(static=True)
-
-    def values(self, t, y, mode, scene):
-        """The condition vector of `mode` at `y` (docs/contact.md, section 4)."""
-        return _solve_with_conditions(t, y, mode, scene, self.model, self.tol)[1]
 
     def start(self, scene, state0, ts) -> dict:
         """The carry of a simulation of `scene` from `state0`, saved at `ts`, before its
@@ -285,6 +281,8 @@ class ContactProgram(eqx.Module):
         args = _Segment(scene, mode, offsets, ~done)
         at_step_end, condition = _step_end_functions(model, tol)
         state_only = lambda t, y, args: y[0]  # noqa: E731
+        # at an event the end state is interpolated at the root: beside it the event
+        # function and the index of the condition that ended the segment (`_step_end.py`)
         with checks_without_host_callbacks():
             sol = dfx.diffeqsolve(
                 dfx.ODETerm(
@@ -307,7 +305,7 @@ class ContactProgram(eqx.Module):
                 saveat=dfx.SaveAt(
                     subs=[
                         dfx.SubSaveAt(ts=jnp.clip(ts, t0, t_end), fn=state_only),
-                        dfx.SubSaveAt(t1=True, fn=state_only),
+                        dfx.SubSaveAt(t1=True),
                     ]
                 ),
                 stepsize_controller=settings.controller,
@@ -317,7 +315,8 @@ class ContactProgram(eqx.Module):
                 throw=False,
             )
         t_stop = sol.ts[1][0]
-        y_stop = unflat(sol.ys[1][0])
+        x_stop, carried_stop = jax.tree.map(lambda a: a[0], sol.ys[1])
+        y_stop = unflat(x_stop)
         ev = jnp.asarray(sol.event_mask) & ~done
         res = RESULTS.promote(sol.result)
         failed = ~done & (res != RESULTS.successful) & (res != RESULTS.event_occurred)
@@ -327,7 +326,7 @@ class ContactProgram(eqx.Module):
         def keep(buf, new):
             return jnp.where(owned.reshape((T,) + (1,) * (buf.ndim - 1)), new, buf)
 
-        trigger = jnp.argmin(self.values(t_stop, y_stop, mode, scene) + offsets)
+        trigger = carried_stop[TRIGGER].astype(carry["trigger"].dtype)  # at an event only
         log["events"] = log["events"] + ev.astype(jnp.int32)
         result = carry["result"]
         result = RESULTS.where(failed & (result == RESULTS.successful), res, result)
@@ -390,12 +389,14 @@ class ContactProgram(eqx.Module):
 def _step_end_functions(model, tol):
     """(at_step_end, condition) of `CarryingSolver` for a segment (`_step_end.py`): the
     event function and the step limit at a step's end, from one solve of the mode, with no
-    derivative; and the event function alone, differentiable, for the root find."""
+    derivative; and, for the root find, the event function, differentiable, with the index
+    of the smallest shifted condition (the trigger, should the segment end there)."""
 
     @traced_once
     def condition(t, x, args):  # x: the segment's flat state
         _, values = _solve_with_conditions(t, unflat(x), args.mode, args.scene, model, tol)
-        return jnp.min(values + args.offsets)
+        shifted = values + args.offsets
+        return jnp.stack([jnp.min(shifted), jnp.argmin(shifted).astype(shifted.dtype)])
 
     @traced_once
     def at_step_end(t, x, args):

@@ -17,7 +17,10 @@ both (it has solved the mode there already).
 
 Between step ends, where the root find of an event evaluates the event function on the
 dense output, the interpolation (`CarryingInterpolation`) computes c from the interpolated
-x, differentiably: the event time's derivative comes from it. h is not used there (0).
+x, differentiably: the event time's derivative comes from it. No step starts there, so the
+second entry holds instead what the caller's `condition` puts there; the contact segment
+puts the index of the smallest condition, so that the state diffrax returns at an event
+(interpolated at the root) says which condition ended the segment, without another solve.
 """
 
 from collections.abc import Callable
@@ -27,6 +30,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 CONDITION, LIMIT = 0, 1  # the entries of the carried values [c, h]
+TRIGGER = 1  # at an interpolated state: the entry after c (see the module docstring)
 
 
 def carried_event_value(t, y, args, **kwargs):
@@ -52,7 +56,8 @@ def _on_state(terms, values):
 
 
 class CarryingInterpolation(dfx.AbstractLocalInterpolation):
-    """The inner solver's dense output of x, with c computed at the interpolated state."""
+    """The inner solver's dense output of x, with [c, k] = `condition(t, x, args)` computed
+    at the interpolated state (k: the caller's; the contact segment's trigger)."""
 
     t0: object
     t1: object
@@ -64,15 +69,15 @@ class CarryingInterpolation(dfx.AbstractLocalInterpolation):
         x = self.inner.evaluate(t0, t1, left)
         if t1 is not None:  # an increment: the values do not change
             return x, jnp.zeros(2, x.dtype)
-        c = self.condition(t0, x, self.args)
-        return x, jnp.stack([c, jnp.zeros_like(c)])
+        return x, self.condition(t0, x, self.args)
 
 
 class CarryingSolver(dfx.AbstractWrappedSolver):
     """`solver` on the segment's state x, returning at each step's end y1 = (x1, [c, h])
     with `at_step_end(t1, x1, args)` -> [c, h] (no derivative needed: diffrax takes only the
-    sign of c there, the controller h). `condition(t, x, args)` -> c is the event function
-    at an interpolated state; `args` are the segment's arguments."""
+    sign of c there, the controller h). `condition(t, x, args)` -> [c, k] gives the event
+    function c at an interpolated state, and k there in place of h (module docstring);
+    `args` are the segment's arguments."""
 
     solver: dfx.AbstractSolver
     args: object
