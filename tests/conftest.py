@@ -51,6 +51,19 @@ def _free_compiled_code():
     jax.clear_caches()
 
 
+@pytest.fixture(autouse=True)
+def _keep_programs_as_the_suite_set_them():
+    """Put back after each test whether and where jaxrb keeps its traced programs. A test
+    that calls `speed_up_compilation(cache=False)` in-process turns the keeping off for the
+    whole process, and every test its worker ran after it then traced and lowered its
+    programs again instead of loading them (a loaded d6's sweep: 26 s of tracing)."""
+    from jaxrb import _persistent
+
+    kept = dict(_persistent._KEEP)
+    yield
+    _persistent._KEEP.update(kept)
+
+
 @pytest.fixture
 def getkey():
     """A function returning a fresh PRNG key on each call (deterministic sequence)."""
