@@ -260,10 +260,13 @@ def solve_impacts(state, geom, points, touching, scene, tol, frames=None, mu=Non
         lam = _gauss_seidel(W, c, target, present, mu, bilateral, jnp.zeros_like(c), SWEEPS)
         # polished three ways: a slot that Gauss-Seidel leaves near its cone's edge may stick
         # (on the edge) or slide; the best (or Gauss-Seidel's own solution) is kept
+        # (a loop over the margins and, below, over the variants, not `jax.vmap`: the same
+        # program, but traced without batching every operation of the polish's unrolled
+        # solve, which was a third of tracing a die's contact program)
         margins = jnp.array(POLISH_MARGINS, dtype)
-        polished = jax.vmap(
-            lambda margin: _polish(W, c, target, present, mu, bilateral, lam, margin)
-        )(margins)
+        polished = jax.lax.map(
+            lambda margin: _polish(W, c, target, present, mu, bilateral, lam, margin), margins
+        )
         tries = jnp.concatenate([lam[None], polished])
         errors = jax.vmap(lambda x: _violation(W, c, target, present, mu, bilateral, x))(tries)
         # prefer an exact (polished) solution on ties: derivatives flow through it only
@@ -277,10 +280,13 @@ def solve_impacts(state, geom, points, touching, scene, tol, frames=None, mu=Non
         )
 
     zero, no_friction = jnp.zeros_like(e), jnp.zeros_like(mu)
-    u_after, generalised, consistent = jax.vmap(variant)(
-        jnp.stack([e, e, zero, zero]),
-        jnp.stack([mu, no_friction, no_friction, no_friction]),
-        jnp.array([False, False, True, False]),
+    u_after, generalised, consistent = jax.lax.map(
+        lambda args: variant(*args),
+        (
+            jnp.stack([e, e, zero, zero]),
+            jnp.stack([mu, no_friction, no_friction, no_friction]),
+            jnp.array([False, False, True, False]),
+        ),
     )
     states = State(
         jnp.broadcast_to(state.pos, (VARIANTS, 3)),
