@@ -18,6 +18,15 @@ program's entry point (the `jaxrb` command line calls it, and so can a script or
   instead of 23-28 ms; B1's batched free bodies ran as fast either way). Left out where an
   accelerator may run the programs (an accelerator plugin installed and `JAX_PLATFORMS`
   not `cpu`), where it has not been measured;
+- on the CPU, every while loop whose operations XLA can emit itself (no library call: a
+  matrix product it hands to Eigen, a custom call, a scatter) compiled as one kernel, loop
+  and body together, up to `SMALL_LOOP_BYTES` of data accessed (XLA's default is 1 KB): a
+  contact simulation's solver loop then runs without a kernel launch per fused operation
+  (a 2-core x86 CPU: a coin rolling on its rim for 1 s at tolerance 1e-12, 16552 steps, in
+  0.37-0.42 s instead of 1.53 s; a roulette ball's first second on the wall, 1048 steps,
+  in 28 ms instead of 171 ms; a die's throw, whose time goes to its 34 impacts, no faster;
+  B1's free bodies as before; compile times as before). Also left out where an
+  accelerator may run the programs;
 - optionally (`nan_checks`), equinox's run-time checks without host callbacks, so that
   derivative programs compiled by the caller's own `jax.jit` can be cached too;
 - jaxrb's traced programs (`programs`): the persistent cache still needs every program
@@ -42,6 +51,10 @@ from ._persistent import keep_programs
 
 CPU_FLAG = "--xla_cpu_use_fusion_emitters=false"
 LOOP_HOISTING_FLAG = "--xla_disable_hlo_passes=while-loop-invariant-code-motion"
+SMALL_LOOP_BYTES = 1 << 26
+SMALL_LOOPS_FLAG = (
+    f"--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold={SMALL_LOOP_BYTES}"
+)
 
 
 def default_cache_dir() -> Path:
@@ -89,6 +102,8 @@ def cpu_compiler_flags(flags: str, cpu_only: bool) -> str:
         added.append(CPU_FLAG)
     if cpu_only and "xla_disable_hlo_passes" not in flags:
         added.append(LOOP_HOISTING_FLAG)
+    if cpu_only and "xla_backend_extra_options" not in flags:
+        added.append(SMALL_LOOPS_FLAG)
     return " ".join([flags.strip(), *added]).strip()
 
 

@@ -176,7 +176,7 @@ class _Describer:
     def tree(self, tree) -> str | None:
         leaves, treedef = jax.tree.flatten(tree)
         types = self.node_types(treedef)
-        parts = [types, repr(treedef)] + [self.leaf(x) for x in leaves]
+        parts = [types, self.treedef_text(treedef)] + [self.leaf(x) for x in leaves]
         if any(p is None for p in parts):
             return None
         text = "|".join(parts)
@@ -197,6 +197,37 @@ class _Describer:
             stack.extend(node.children())
         return ",".join(names)
 
+    def treedef_text(self, treedef) -> str | None:
+        """The tree's structure as text: its repr, with each function held in a node's data
+        (equinox's bound method holds its class's function) named as `function` names it,
+        not by its repr, which carries a memory address."""
+        text = repr(treedef)
+        for fn in self.node_functions(treedef):
+            named = self.function(fn)
+            if named is None:
+                return None
+            text = text.replace(repr(fn), named)
+        return text
+
+    def node_functions(self, treedef) -> list:
+        """The functions held in the node data of `treedef` (in tuples, lists and dicts)."""
+        found, stack = [], [treedef]
+        while stack:
+            node = stack.pop()
+            data = node.node_data()
+            if data is not None:
+                items = [data[1]]
+                while items:
+                    item = items.pop()
+                    if isinstance(item, (tuple, list)):
+                        items.extend(item)
+                    elif isinstance(item, dict):
+                        items.extend(item.values())
+                    elif isinstance(item, functools.partial) or hasattr(item, "__code__"):
+                        found.append(item)
+            stack.extend(node.children())
+        return found
+
     def leaf(self, x) -> str | None:
         if isinstance(x, jax.core.Tracer):  # closed over inside a transformation
             return None
@@ -208,8 +239,8 @@ class _Describer:
             digest = hashlib.sha256(np.ascontiguousarray(x).tobytes()).hexdigest()
             return f"array{x.shape}{x.dtype.str}{'weak' if weak else ''}:{digest}"
         if isinstance(x, jax.tree_util.PyTreeDef):
-            types = self.node_types(x)
-            return None if types is None else f"treedef[{types}]{x!r}"
+            types, text = self.node_types(x), self.treedef_text(x)
+            return None if types is None or text is None else f"treedef[{types}]{text}"
         if isinstance(x, functools.partial) or hasattr(x, "__code__"):
             return self.function(x)
         if not self.trusted_type(type(x)):
@@ -386,7 +417,8 @@ def _key(fn, static, in_tree, leaves, sources) -> str | None:
     describe = _Describer(paths)
     name = describe.function(fn)
     described = describe.tree(static)
-    if name is None or described is None:
+    structure = describe.treedef_text(in_tree)
+    if name is None or described is None or structure is None or " at 0x" in structure:
         return None
     h = hashlib.sha256()
     for part in (
@@ -394,7 +426,7 @@ def _key(fn, static, in_tree, leaves, sources) -> str | None:
         _versions(),
         name,
         described,
-        repr(in_tree),
+        structure,
         ";".join(f"{x.shape}{x.dtype}{getattr(x, 'weak_type', False)}" for x in leaves),
         str(jax.config.jax_enable_x64),
         str(jax.config.jax_numpy_dtype_promotion),
@@ -439,7 +471,13 @@ def _load_or_export(key, fn, static, in_tree, leaves, cache_dir, quiet):
         except Exception:  # a damaged or foreign file: export again and replace it
             exported = None
     if exported is None:
-        made = _export(fn, static, in_tree, avals, quiet)
+        # traced with the arguments' weak types (a weakly typed float64 scalar combines with
+        # float32 arrays as float32, where a strong one would not combine at all)
+        traced = [
+            jax.ShapeDtypeStruct(np.shape(x), x.dtype, weak_type=getattr(x, "weak_type", False))
+            for x in leaves
+        ]
+        made = _export(fn, static, in_tree, traced, quiet)
         if made is None:
             return None
         exported, out_tree, blob = made

@@ -6,15 +6,25 @@ import re
 import subprocess
 import sys
 
-from jaxrb._compilation import CPU_FLAG, LOOP_HOISTING_FLAG, cpu_compiler_flags
+from jaxrb._compilation import (
+    CPU_FLAG,
+    LOOP_HOISTING_FLAG,
+    SMALL_LOOPS_FLAG,
+    cpu_compiler_flags,
+)
 
 
-def test_both_cpu_flags_added_where_only_the_cpu_runs():
-    assert cpu_compiler_flags("", cpu_only=True) == f"{CPU_FLAG} {LOOP_HOISTING_FLAG}"
+def test_the_cpu_flags_added_where_only_the_cpu_runs():
+    assert cpu_compiler_flags("", cpu_only=True).split() == [
+        CPU_FLAG,
+        LOOP_HOISTING_FLAG,
+        SMALL_LOOPS_FLAG,
+    ]
     assert cpu_compiler_flags(" --xla_foo=1 ", cpu_only=True).split() == [
         "--xla_foo=1",
         CPU_FLAG,
         LOOP_HOISTING_FLAG,
+        SMALL_LOOPS_FLAG,
     ]
 
 
@@ -23,14 +33,19 @@ def test_loop_pass_kept_where_an_accelerator_may_run():
 
 
 def test_a_users_own_choices_are_left_alone():
-    mine = "--xla_cpu_use_fusion_emitters=true --xla_disable_hlo_passes=algsimp"
+    mine = (
+        "--xla_cpu_use_fusion_emitters=true --xla_disable_hlo_passes=algsimp "
+        "--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold=0"
+    )
     assert cpu_compiler_flags(mine, cpu_only=True) == mine
 
 
 # In a process of its own: `speed_up_compilation` changes `XLA_FLAGS` before JAX starts its
 # backend. A loop whose body computes sin(a) from an argument `a` that does not change in the
 # loop: XLA's hoisting pass moves the sine out of the loop; with the pass off it stays in the
-# loop's body. Prints the flags and whether the body (or a computation it calls) holds it.
+# loop's body. Prints the flags, whether a loop over 32 KB of data became one kernel (a call
+# XLA marks `xla_cpu_small_call`; by default only loops over less than 1 KB do), and whether
+# the sine loop's body (or a computation it calls) holds the sine.
 _PROBE = """
 import re, sys
 import jax, jax.numpy as jnp
@@ -39,6 +54,9 @@ if sys.argv[1] == "on":
     jaxrb.speed_up_compilation(cache=False)
 import os
 print(os.environ.get("XLA_FLAGS", ""))
+g = lambda x: jax.lax.fori_loop(0, 5, lambda i, y: jnp.cos(y), x)
+big = jax.jit(g).lower(jnp.ones(4096)).compile().as_text()
+print("one kernel" if "xla_cpu_small_call" in big else "kernels")
 f = lambda a, x: jax.lax.fori_loop(0, 5, lambda i, y: y + jnp.sin(a), x)
 text = jax.jit(f).lower(jnp.ones(8), jnp.ones(8)).compile().as_text()
 blocks = {}
@@ -75,16 +93,20 @@ def _python(code, platforms, *args):
 
 def _probe(mode):
     out = _python(_PROBE, "cpu", mode).splitlines()
-    return out[-2], out[-1]
+    return out[-3], out[-2], out[-1]
 
 
-def test_speed_up_compilation_turns_off_loop_hoisting_on_the_cpu():
-    flags, where = _probe("on")
+def test_speed_up_compilation_sets_the_cpu_loop_passes():
+    flags, loop, where = _probe("on")
     assert CPU_FLAG in flags.split() and LOOP_HOISTING_FLAG in flags.split()
+    assert SMALL_LOOPS_FLAG in flags.split()
+    assert loop == "one kernel"
     assert where == "sine in loop"
-    # the probe can tell: without the setting XLA hoists the sine
-    flags, where = _probe("off")
-    assert not re.search("xla_disable_hlo_passes", flags)
+    # the probe can tell: without the settings XLA hoists the sine and runs the large loop's
+    # body kernel by kernel
+    flags, loop, where = _probe("off")
+    assert not re.search("xla_disable_hlo_passes|xla_backend_extra_options", flags)
+    assert loop == "kernels"
     assert where == "sine hoisted"
 
 

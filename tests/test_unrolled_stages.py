@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from programs import persistent
 
 import jaxrb
 from jaxrb import _persistent, _unrolled_stages
@@ -45,6 +46,14 @@ def final_sum(solver, a):
     return sum(jnp.sum(y[-1]) for y in solve(solver, a).ys)
 
 
+# compiled once per solver, kept between runs of the suite (the solver is a static argument)
+solve_kept = persistent(solve)
+final_sum_kept = persistent(final_sum)
+gradient_kept = persistent(lambda solver, a: jax.grad(lambda b: final_sum(solver, b))(a))
+saves_kept = persistent(lambda a: solve(UnrolledTsit5(), a).ys)
+batched_saves_kept = persistent(jax.vmap(lambda a: solve(UnrolledTsit5(), a).ys))
+
+
 @pytest.mark.parametrize("solver", [dfx.Tsit5(), dfx.Dopri5(), dfx.Dopri8()], ids=repr)
 def test_same_steps_and_saves_as_diffrax(solver):
     """Interior saves come from the solver's own interpolation of the written-out stages; a
@@ -52,8 +61,8 @@ def test_same_steps_and_saves_as_diffrax(solver):
     twin = unrolled(solver)
     assert type(twin) is not type(solver) and isinstance(twin, type(solver))
     for jump_ts in (None, jnp.array([1.3])):
-        ref = jax.jit(lambda a, s=solver, j=jump_ts: solve(s, a, j))(1.0)
-        out = jax.jit(lambda a, s=twin, j=jump_ts: solve(s, a, j))(1.0)
+        ref = solve_kept(solver, 1.0, jump_ts)
+        out = solve_kept(twin, 1.0, jump_ts)
         assert int(out.stats["num_steps"]) == int(ref.stats["num_steps"])
         assert int(out.stats["num_rejected_steps"]) == int(ref.stats["num_rejected_steps"])
         for y, r in zip(out.ys, ref.ys, strict=True):
@@ -63,11 +72,10 @@ def test_same_steps_and_saves_as_diffrax(solver):
 
 @pytest.mark.parametrize("twin", [UnrolledTsit5(), UnrolledDopri8()], ids=repr)
 def test_reverse_gradient_against_finite_differences(twin):
-    grad = float(jax.jit(jax.grad(lambda a: final_sum(twin, a)))(1.0))
-    f = jax.jit(lambda a: final_sum(twin, a))
+    grad = float(gradient_kept(twin, 1.0))
     h = 1e-5
-    fd = (float(f(1.0 + h)) - float(f(1.0 - h))) / (2 * h)
-    base = float(jax.jit(jax.grad(lambda a: final_sum(dfx.Dopri8(), a)))(1.0))
+    fd = (float(final_sum_kept(twin, 1.0 + h)) - float(final_sum_kept(twin, 1.0 - h))) / (2 * h)
+    base = float(gradient_kept(dfx.Dopri8(), 1.0))
     assert abs(grad - fd) < 1e-6 * abs(fd)
     assert abs(grad - base) < 1e-6 * abs(base)
 
@@ -75,8 +83,8 @@ def test_reverse_gradient_against_finite_differences(twin):
 def test_under_vmap_equals_each_member_alone():
     """The FSAL first stage is taken under `jax.vmap` too (its condition is batch-wide)."""
     a = jnp.array([0.5, 1.0, 1.7])
-    batched = jax.jit(jax.vmap(lambda a: solve(UnrolledTsit5(), a).ys))(a)
-    one = jax.jit(lambda a: solve(UnrolledTsit5(), a).ys)
+    batched = batched_saves_kept(a)
+    one = saves_kept
     for i in range(3):
         for y, r in zip(batched, one(a[i]), strict=True):
             np.testing.assert_allclose(y[i], r, rtol=0, atol=1e-12)
