@@ -185,16 +185,10 @@ class _Describer:
     def node_types(self, treedef) -> str | None:
         """The module and name of every node type (the tree's repr names classes only)."""
         names = []
-        stack = [treedef]
-        while stack:
-            node = stack.pop()
-            data = node.node_data()
-            if data is not None:
-                t = data[0]
-                if not self.trusted_type(t):
-                    return None
-                names.append(f"{t.__module__}.{t.__qualname__}")
-            stack.extend(node.children())
+        for t, _ in _node_data(treedef):
+            if not self.trusted_type(t):
+                return None
+            names.append(f"{t.__module__}.{t.__qualname__}")
         return ",".join(names)
 
     def treedef_text(self, treedef) -> str | None:
@@ -211,21 +205,17 @@ class _Describer:
 
     def node_functions(self, treedef) -> list:
         """The functions held in the node data of `treedef` (in tuples, lists and dicts)."""
-        found, stack = [], [treedef]
-        while stack:
-            node = stack.pop()
-            data = node.node_data()
-            if data is not None:
-                items = [data[1]]
-                while items:
-                    item = items.pop()
-                    if isinstance(item, (tuple, list)):
-                        items.extend(item)
-                    elif isinstance(item, dict):
-                        items.extend(item.values())
-                    elif isinstance(item, functools.partial) or hasattr(item, "__code__"):
-                        found.append(item)
-            stack.extend(node.children())
+        found = []
+        for _, aux in _node_data(treedef):
+            items = [aux]
+            while items:
+                item = items.pop()
+                if isinstance(item, (tuple, list)):
+                    items.extend(item)
+                elif isinstance(item, dict):
+                    items.extend(item.values())
+                elif isinstance(item, functools.partial) or hasattr(item, "__code__"):
+                    found.append(item)
         return found
 
     def leaf(self, x) -> str | None:
@@ -272,6 +262,17 @@ class _Describer:
         if wrapped is not None:
             parts.append(self.function(wrapped, depth + 1))
         return None if any(p is None for p in parts) else "(" + ", ".join(parts) + ")"
+
+
+def _node_data(treedef):
+    """(node type, auxiliary data) of each node of `treedef` that has them, depth first."""
+    stack = [treedef]
+    while stack:
+        node = stack.pop()
+        data = node.node_data()
+        if data is not None:
+            yield data
+        stack.extend(node.children())
 
 
 def _source_files(fn) -> tuple[str, ...]:
