@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, Phase, given, settings, strategies as st
+from programs import persistent
 
 import jaxrb
 
@@ -108,7 +109,9 @@ def _run(mass, inertia, radius, g_z, drag, omega, quat, ts, rtol):
     return traj.result, traj.num_steps, s, energy, scale
 
 
-_run_batch = jax.jit(jax.vmap(_run))
+@persistent
+def _run_batch(mass, inertia, radius, g_z, drag, omega, quat, ts, rtol):
+    return jax.vmap(_run)(mass, inertia, radius, g_z, drag, omega, quat, ts, rtol)
 
 
 def _arrays(batch):

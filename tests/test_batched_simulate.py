@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from programs import persistent
 
 import jaxrb
 from jaxrb import analytic
@@ -219,19 +220,32 @@ def finite_differences():
     return d_inertia, direction, d_omega
 
 
+@persistent
+def _observable_gradient(inertia, omega0):
+    return jax.grad(_observable, argnums=(0, 1))(inertia, omega0)
+
+
+@persistent
+def _observable_forward_derivatives(inertia, omega0, direction):
+    """Forward mode (diffrax's `ForwardMode` adjoint): the Jacobian along the inertia axes
+    and the derivative along `direction` of all members' initial omega."""
+    fwd = dfx.ForwardMode()
+    jac = jax.jacfwd(lambda i: _observable(i, omega0, fwd))(inertia)
+    _, tangent = jax.jvp(lambda w: _observable(inertia, w, fwd), (omega0,), (direction,))
+    return jac, tangent
+
+
 def test_reverse_mode_gradient_of_a_batch(finite_differences):
     d_inertia, direction, d_omega = finite_differences
-    g_inertia, g_omega = jax.jit(jax.grad(_observable, argnums=(0, 1)))(I_GRAD, OMEGA_GRAD)
+    g_inertia, g_omega = _observable_gradient(I_GRAD, OMEGA_GRAD)
     np.testing.assert_allclose(g_inertia, d_inertia, rtol=1e-6, atol=1e-7)
     np.testing.assert_allclose(jnp.sum(g_omega * direction), d_omega, rtol=1e-6, atol=1e-7)
 
 
 def test_forward_mode_gradient_of_a_batch(finite_differences):
     d_inertia, direction, d_omega = finite_differences
-    fwd = dfx.ForwardMode()
-    jac = jax.jit(jax.jacfwd(lambda i: _observable(i, OMEGA_GRAD, fwd)))(I_GRAD)
+    jac, tangent = _observable_forward_derivatives(I_GRAD, OMEGA_GRAD, direction)
     np.testing.assert_allclose(jac, d_inertia, rtol=1e-6, atol=1e-7)
-    _, tangent = jax.jvp(lambda w: _observable(I_GRAD, w, fwd), (OMEGA_GRAD,), (direction,))
     np.testing.assert_allclose(tangent, d_omega, rtol=1e-6, atol=1e-7)
 
 

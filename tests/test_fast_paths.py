@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from programs import persistent
 
 import jaxrb
 from jaxrb._batched import simulate_batch
@@ -163,19 +164,30 @@ def test_simulate_batch_in_parts_with_one_inertia_per_body(batch):
     _exact_gravity_checks(traj, batch, inertias)
 
 
+def _final_spin(batch, omega0, part_size):
+    """A weighted sum of the members' final spins about body x, the batch in parts of
+    `part_size` members (None: one solve)."""
+    states = jaxrb.State(batch.pos, batch.quat, batch.vel, omega0)
+    traj = simulate_batch(
+        GRAVITY_SCENE, states, PART_TS, rtol=1e-11, atol=1e-11, part_size=part_size
+    )
+    return jnp.sum(traj.states.omega[:, -1, 0] * jnp.arange(1.0, 7.0))
+
+
+@persistent(static_argnames="part_size")
+def _final_spin_gradient(batch, omega0, part_size):
+    return jax.grad(_final_spin, argnums=1)(batch, omega0, part_size)
+
+
 def test_reverse_gradient_through_the_parts(batch):
     """The reverse-mode gradient of a batch in parts (`jax.lax.map` over the solves) equals
     the one-solve batch's and central differences (float64)."""
 
     def final_spin(omega0, part_size):
-        states = jaxrb.State(batch.pos, batch.quat, batch.vel, omega0)
-        traj = simulate_batch(
-            GRAVITY_SCENE, states, PART_TS, rtol=1e-11, atol=1e-11, part_size=part_size
-        )
-        return jnp.sum(traj.states.omega[:, -1, 0] * jnp.arange(1.0, 7.0))
+        return _final_spin(batch, omega0, part_size)
 
-    parts = jax.grad(final_spin)(batch.omega, 4)
-    whole = jax.grad(final_spin)(batch.omega, None)
+    parts = _final_spin_gradient(batch, batch.omega, 4)
+    whole = _final_spin_gradient(batch, batch.omega, None)
     np.testing.assert_allclose(parts, whole, rtol=1e-7, atol=1e-8)
     h = 1e-5
     bump = jnp.zeros_like(batch.omega).at[5, 1].set(h)  # a member of the second part
@@ -303,14 +315,25 @@ def test_exact_flow_long_time_invariants(batch):
     np.testing.assert_allclose(jnp.linalg.norm(ex.quat, axis=-1), 1.0, atol=1e-14)
 
 
+@persistent
+def _flow_quat(omega0):
+    """The exact torque-free attitude at t = 3 s from omega0 (rad/s, body frame)."""
+    return torque_free_flow(INERTIA, jaxrb.make_state(omega=omega0), 3.0).quat
+
+
+@persistent
+def _flow_quat_gradient(omega0, c):
+    return jax.grad(lambda w: jnp.sum(_flow_quat(w) * c))(omega0)
+
+
 def test_exact_flow_grad(batch):
     """Reverse-mode derivative of q(t) in omega0 matches central finite differences."""
-    f = jax.jit(lambda w: torque_free_flow(INERTIA, jaxrb.make_state(omega=w), 3.0).quat)
+    f = _flow_quat
     w0 = batch.omega[0]
     eps = 1e-6
     fd = jnp.stack([(f(w0 + eps * e) - f(w0 - eps * e)) / (2 * eps) for e in jnp.eye(3)], -1)
     c = jnp.array([0.3, -0.2, 0.5, 0.1])
-    gr = jax.jit(jax.grad(lambda w: jnp.sum(f(w) * c)))(w0)
+    gr = _flow_quat_gradient(w0, c)
     np.testing.assert_allclose(gr, c @ fd, atol=1e-7)
 
 

@@ -4,10 +4,10 @@ carried event function crosses zero (located on the dense output), the state at 
 names the condition that ended the run, and every step is cut to the carried step limit."""
 
 import diffrax as dfx
-import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from programs import persistent
 
 from jaxrb.contact._events import EventTime
 from jaxrb.contact._step_end import (
@@ -36,6 +36,7 @@ def _condition(t, x, args):  # the event function: the smaller condition
     return jnp.min(_conditions(t, x, args))
 
 
+@persistent
 def _plain(dtmax, v_min=-jnp.inf):
     """The same problem without carried values: the event function evaluated by diffrax."""
     return dfx.diffeqsolve(
@@ -53,9 +54,18 @@ def _plain(dtmax, v_min=-jnp.inf):
     )
 
 
-def _carrying(limit, v_min=-jnp.inf, fn=lambda t, y, args: y[0]):
+def _position(t, y, args):
+    return y[0]
+
+
+def _state_and_carried(t, y, args):
+    return y
+
+
+@persistent(static_argnames="fn")
+def _carrying(limit, v_min=-jnp.inf, fn=_position):
     """The problem with [c, h] carried beside the state, h = `limit` (s); at an
-    interpolated state [c, k], k the index of the smaller condition."""
+    interpolated state [c, k], k the index of the smaller condition. `fn` what is saved."""
 
     def at_step_end(t, x, args):
         return jnp.stack([_condition(t, x, args), jnp.asarray(limit, x.dtype)])
@@ -84,8 +94,8 @@ def test_carried_values_leave_the_solvers_steps_alone():
     """With a step limit that never binds, the carried run takes the plain run's steps and
     finds its event time and state to roundoff; the event function at the event (computed by
     the dense output) is zero there."""
-    plain = jax.jit(lambda: _plain(None))()
-    carried = jax.jit(lambda: _carrying(jnp.inf))()
+    plain = _plain(None)
+    carried = _carrying(jnp.inf)
     assert int(plain.stats["num_accepted_steps"]) == int(carried.stats["num_accepted_steps"])
     assert int(plain.stats["num_rejected_steps"]) == int(carried.stats["num_rejected_steps"])
     assert bool(plain.event_mask) and bool(carried.event_mask)
@@ -103,8 +113,8 @@ def test_every_step_is_cut_to_the_carried_limit():
     """With a carried step limit of 0.05 s (well under the steps the tolerance allows) every
     step is at most that long, and the run matches the plain run whose controller caps its
     steps at 0.05 s the same way (diffrax's `dtmax`)."""
-    carried = jax.jit(lambda: _carrying(0.05))()
-    plain = jax.jit(lambda: _plain(0.05))()
+    carried = _carrying(0.05)
+    plain = _plain(0.05)
     ts = np.asarray(carried.ts)
     ts = ts[np.isfinite(ts)]
     steps = np.diff(ts)
@@ -122,8 +132,8 @@ def test_the_state_at_the_event_names_the_condition_that_ended_the_run(v_min, wh
     function (zero there) and the index of the condition that ended the run, as the contact
     segment reads its trigger. With the velocity's condition at -0.8 the velocity ends the
     run before the position reaches -0.5; without it, the position does."""
-    carried = jax.jit(lambda: _carrying(jnp.inf, v_min, fn=lambda t, y, args: y))()
-    plain = jax.jit(lambda: _plain(None, v_min))()
+    carried = _carrying(jnp.inf, v_min, fn=_state_and_carried)
+    plain = _plain(None, v_min)
     last = np.flatnonzero(np.isfinite(np.asarray(carried.ts)))[-1]
     x_end, values_end = carried.ys[0][last], carried.ys[1][last]
     assert int(values_end[TRIGGER]) == which
