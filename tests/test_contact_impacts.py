@@ -192,6 +192,12 @@ def _face_landing(key, e, mu):
     return *kinetics, law, renumbered, event, jnp.sum(touching), approach
 
 
+@persistent
+def _face_landings(key_data, es, mus):
+    """`_face_landing` for each key (its raw data), restitution and friction coefficient."""
+    return jax.vmap(_face_landing)(jax.random.wrap_key_data(key_data), es, mus)
+
+
 def test_impact_law_face_landings(getkey):
     """Face landings (four touching corners, solved together): the outcome does not depend
     on how the corners are numbered; the Newton-Coulomb impulse pushes and stays in the
@@ -202,7 +208,8 @@ def test_impact_law_face_landings(getkey):
     keys = jax.random.split(getkey(), n)
     es = jax.random.uniform(getkey(), (n,))
     mus = jax.random.uniform(getkey(), (n,), maxval=1.5)
-    k0, k1, law, renumbered, event, touching, approach = jax.vmap(_face_landing)(keys, es, mus)
+    out = _face_landings(jax.random.key_data(keys), es, mus)
+    k0, k1, law, renumbered, event, touching, approach = out
     assert np.all(np.asarray(touching) == 4)
     app = np.asarray(approach)
     assert app.sum() > n // 2  # most random landings approach (a real impact test)
