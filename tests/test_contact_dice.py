@@ -189,31 +189,24 @@ def test_throws_in_refilled_lanes_equal_per_throw_runs(getkey, lanes):
         _assert_member_is_its_own_run(run, out, int(i), omegas[i], heights[i])
 
 
+# Runs `simulate_throws` on the throws pickled at argv[1] and saves its results to argv[2].
 _THROWS_ON_TWO_DEVICES = """
+import pickle
 import sys
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 jax.config.update("jax_enable_x64", True)
 import jaxrb
 
 assert len(jax.local_devices()) == 2
-ball = jaxrb.RigidBody(0.05, shape=jaxrb.Sphere(0.02))
-scene = jaxrb.Scene(ball, forces=(jaxrb.Gravity(),), floor=jaxrb.Floor(0.6, 0.3))
-heights = jnp.array([0.05, 0.1, 0.15])  # three throws: padded to four over two devices
-states0 = jax.vmap(
-    lambda z: jaxrb.make_state(pos=jnp.stack([0.0, 0.0, z]), vel=(0.4, 0.0, 0.0),
-                               omega=(0.0, 20.0, 5.0))
-)(heights)
-ts = jnp.linspace(0.0, 0.4, 5)
+with open(sys.argv[1], "rb") as f:
+    scene, states0, ts = pickle.load(f)
 out = jaxrb.simulate_throws(scene, states0, ts, max_impacts=16)
-assert out.states.pos.shape == (3, 5, 3)
 assert len(out.states.pos.sharding.device_set) == 2  # computed on both devices
 assert np.asarray(out.result == jaxrb.RESULTS.successful).all()
-np.savez(sys.argv[1], pos=out.states.pos, vel=out.states.vel, count=out.impacts.count,
-         pos0=states0.pos, vel0=states0.vel, omega0=states0.omega, ts=ts)
+np.savez(sys.argv[2], pos=out.states.pos, vel=out.states.vel, count=out.impacts.count)
 print("ok")
 """
 
@@ -224,13 +217,24 @@ def test_throws_split_over_host_devices(tmp_path):
     run's (here, in the suite's one-device process), to roundoff. A separate process, since
     the device count is fixed when JAX starts."""
     import os
+    import pickle
     import subprocess
     import sys
 
+    ball = jaxrb.RigidBody(0.05, shape=jaxrb.Sphere(0.02))
+    scene = jaxrb.Scene(ball, forces=(jaxrb.Gravity(),), floor=jaxrb.Floor(0.6, 0.3))
+    heights = jnp.array([0.05, 0.1, 0.15])  # three throws: padded to four over two devices
+    states0 = jax.vmap(
+        lambda z: jaxrb.make_state(
+            pos=jnp.stack([0.0, 0.0, z]), vel=(0.4, 0.0, 0.0), omega=(0.0, 20.0, 5.0)
+        )
+    )(heights)
+    ts = jnp.linspace(0.0, 0.4, 5)
+    throws, saved = tmp_path / "throws.pkl", tmp_path / "results.npz"
+    throws.write_bytes(pickle.dumps((scene, states0, ts)))
     env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2")
-    saved = tmp_path / "throws.npz"
     out = subprocess.run(
-        [sys.executable, "-c", _THROWS_ON_TWO_DEVICES, str(saved)],
+        [sys.executable, "-c", _THROWS_ON_TWO_DEVICES, str(throws), str(saved)],
         env=env,
         capture_output=True,
         text=True,
@@ -239,11 +243,9 @@ def test_throws_split_over_host_devices(tmp_path):
     assert out.returncode == 0, out.stderr[-3000:]
     assert out.stdout.strip().endswith("ok")
     two = np.load(saved)
-    ball = jaxrb.RigidBody(0.05, shape=jaxrb.Sphere(0.02))
-    scene = jaxrb.Scene(ball, forces=(jaxrb.Gravity(),), floor=jaxrb.Floor(0.6, 0.3))
+    assert two["pos"].shape == (3, 5, 3)
     for i in range(3):
-        state0 = jaxrb.make_state(pos=two["pos0"][i], vel=two["vel0"][i], omega=two["omega0"][i])
-        own = jaxrb.simulate(scene, state0, jnp.asarray(two["ts"]), max_impacts=16)
+        own = jaxrb.simulate(scene, jax.tree.map(lambda x, i=i: x[i], states0), ts, max_impacts=16)
         assert int(two["count"][i]) == int(own.impacts.count) > 0
         np.testing.assert_allclose(two["pos"][i], np.asarray(own.states.pos), rtol=0, atol=1e-9)
         np.testing.assert_allclose(two["vel"][i], np.asarray(own.states.vel), rtol=0, atol=1e-8)

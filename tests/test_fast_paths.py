@@ -182,16 +182,14 @@ def _final_spin_gradient(batch, omega0, part_size):
 def test_reverse_gradient_through_the_parts(batch):
     """The reverse-mode gradient of a batch in parts (`jax.lax.map` over the solves) equals
     the one-solve batch's and central differences (float64)."""
-
-    def final_spin(omega0, part_size):
-        return _final_spin(batch, omega0, part_size)
-
     parts = _final_spin_gradient(batch, batch.omega, 4)
     whole = _final_spin_gradient(batch, batch.omega, None)
     np.testing.assert_allclose(parts, whole, rtol=1e-7, atol=1e-8)
     h = 1e-5
     bump = jnp.zeros_like(batch.omega).at[5, 1].set(h)  # a member of the second part
-    central = (final_spin(batch.omega + bump, 4) - final_spin(batch.omega - bump, 4)) / (2 * h)
+    central = (
+        _final_spin(batch, batch.omega + bump, 4) - _final_spin(batch, batch.omega - bump, 4)
+    ) / (2 * h)
     np.testing.assert_allclose(parts[5, 1], central, rtol=1e-6)
 
 
@@ -328,10 +326,12 @@ def _flow_quat_gradient(omega0, c):
 
 def test_exact_flow_grad(batch):
     """Reverse-mode derivative of q(t) in omega0 matches central finite differences."""
-    f = _flow_quat
     w0 = batch.omega[0]
     eps = 1e-6
-    fd = jnp.stack([(f(w0 + eps * e) - f(w0 - eps * e)) / (2 * eps) for e in jnp.eye(3)], -1)
+    fd = jnp.stack(
+        [(_flow_quat(w0 + eps * e) - _flow_quat(w0 - eps * e)) / (2 * eps) for e in jnp.eye(3)],
+        -1,
+    )
     c = jnp.array([0.3, -0.2, 0.5, 0.1])
     gr = _flow_quat_gradient(w0, c)
     np.testing.assert_allclose(gr, c @ fd, atol=1e-7)

@@ -84,9 +84,8 @@ def test_under_vmap_equals_each_member_alone():
     """The FSAL first stage is taken under `jax.vmap` too (its condition is batch-wide)."""
     a = jnp.array([0.5, 1.0, 1.7])
     batched = batched_saves_kept(a)
-    one = saves_kept
     for i in range(3):
-        for y, r in zip(batched, one(a[i]), strict=True):
+        for y, r in zip(batched, saves_kept(a[i]), strict=True):
             np.testing.assert_allclose(y[i], r, rtol=0, atol=1e-12)
 
 
