@@ -10,14 +10,14 @@ what the program is made from, and a later process loads it instead of tracing.
 Beside it goes the executable XLA compiled from it for this machine (`<key>.<machine>.exe`,
 the machine being the backend, device, `XLA_FLAGS` and processor), and a later process loads
 that first: no lowering, no lookup in JAX's cache (a die's contact program: 0.9 s against
-1.4 s on a 2-core x86 CPU). Only an executable XLA compiled in this process is kept: read
-back from JAX's persistent cache, an executable serialises without its code (loaded again,
-it fails with "Function ... not found"), and that program is then served by JAX's cache as
-before. Nor is one whose program calls a custom kernel (a `stablehlo.custom_call`, e.g.
-LAPACK's SVD or LU on a CPU): jaxlib sets those kernels up when it lowers such a call, so a
-new process that only loaded the executable would call an unset kernel (a segmentation
-fault, as in JAX issue 28908). An executable that does not load, or loads and fails at its
-first run, is removed and the call traced as usual.
+1.4 s on a 2-core x86 CPU). An executable read back from JAX's persistent cache serialises
+without its code (loaded again, it fails with "Function ... not found"), so where JAX's cache
+served the compile, what is kept is the executable as that cache held it. A program that
+calls a custom kernel is kept only where the kernels are LAPACK's (a `stablehlo.custom_call`
+such as the SVD or LU on a CPU): jaxlib sets them up when it lowers such a call, so the
+process that loads the executable sets them up first (without it, a segmentation fault, as
+in JAX issue 28908). An executable that does not load, or loads and fails at its first run,
+is removed and the call traced as usual.
 
 The key is a SHA-256 of: the source of the `jaxrb` package, the file that defines `fn`, the
 files and folders named in `sources`, `fn`'s name, the static part of the arguments (every
@@ -42,8 +42,10 @@ import functools
 import gc
 import hashlib
 import importlib.metadata
+import io
 import os
 import pickle
+import re
 import sys
 import time
 import warnings
@@ -483,33 +485,64 @@ def _load_or_export(key, fn, static, in_tree, leaves, cache_dir, quiet):
             return None
         exported, out_tree, blob = made
         _write(path, blob)
-    compiled, fresh = _compile(exported, avals)
-    # read back from JAX's cache, an executable does not serialise whole; one that calls a
-    # custom kernel (LAPACK's, on a CPU) runs only where the kernel was set up, which jaxlib
-    # does when it lowers such a call: loaded by itself in a new process, it would crash
-    if fresh and b"custom_call" not in exported.mlir_module_serialized:
-        _keep_executable(executable, compiled, out_tree)
+    compiled, code = _compile(exported, avals)
+    kernels = _custom_kernels(exported)
+    if code is not False and all(k.startswith("lapack_") for k in kernels):
+        _keep_executable(executable, compiled, out_tree, code, lapack=bool(kernels))
     return compiled, out_tree, None
 
 
 def _compile(exported, avals):
-    """(the compiled program, whether XLA compiled it here rather than JAX reading it from
-    its persistent cache)."""
+    """(the compiled program, its executable's bytes): None where XLA compiled it here (it
+    then serialises whole), the bytes JAX's persistent cache held where that cache served it
+    (the compiled program then serialises without its code), False where it was served but
+    the bytes could not be seen (another JAX)."""
+    from jax._src import compilation_cache
+
+    extract = getattr(compilation_cache, "extract_executable_and_time", None)
     monitoring = jax.monitoring
-    if not hasattr(monitoring, "unregister_event_listener"):  # an older JAX: cannot tell
+    if extract is None or not hasattr(monitoring, "unregister_event_listener"):
         return jax.jit(exported.call).lower(*avals).compile(), False
-    hits = []
+    hits, read = [], []
 
     def count(event, **kwargs):
         if event == "/jax/compilation_cache/cache_hits":
             hits.append(event)
 
+    def extract_and_see(entry):
+        code, compile_time = extract(entry)
+        read.append(code)
+        return code, compile_time
+
     monitoring.register_event_listener(count)
+    compilation_cache.extract_executable_and_time = extract_and_see
     try:
         compiled = jax.jit(exported.call).lower(*avals).compile()
     finally:
+        compilation_cache.extract_executable_and_time = extract
         monitoring.unregister_event_listener(count)
-    return compiled, not hits
+    if not hits:
+        return compiled, None
+    return compiled, (read[-1] if len(read) == 1 else False)
+
+
+def _custom_kernels(exported) -> set[str]:
+    """The custom kernels the exported program calls (`stablehlo.custom_call` targets)."""
+    if b"custom_call" not in exported.mlir_module_serialized:
+        return set()
+    return set(re.findall(r"custom_call @([\w.$-]+)", exported.mlir_module()))
+
+
+def _set_up_lapack() -> bool:
+    """Set jaxlib's LAPACK kernels up, as lowering a call to one does; False where this
+    jaxlib has no such set-up."""
+    try:
+        from jaxlib import lapack
+
+        lapack._lapack.initialize()
+    except Exception:  # noqa: BLE001
+        return False
+    return True
 
 
 def _export(fn, static, in_tree, avals, quiet):
@@ -579,7 +612,9 @@ def _load_executable(path: Path, avals):
     try:
         from jax.experimental import serialize_executable
 
-        payload, in_tree, out_tree, exe_out_tree = pickle.loads(path.read_bytes())
+        payload, in_tree, out_tree, exe_out_tree, lapack = pickle.loads(path.read_bytes())
+        if lapack and not _set_up_lapack():
+            return None
         compiled = serialize_executable.deserialize_and_load(
             zlib.decompress(payload), in_tree, exe_out_tree
         )
@@ -593,13 +628,39 @@ def _load_executable(path: Path, avals):
         return None
 
 
-def _keep_executable(path: Path, compiled, out_tree) -> None:
-    """Keep `compiled` at `path` (compressed; skipped where the backend cannot serialise)."""
+def _keep_executable(path: Path, compiled, out_tree, code=None, lapack=False) -> None:
+    """Keep `compiled` at `path` (compressed; skipped where the backend cannot serialise),
+    with `code` (an executable's bytes as JAX's cache held them) in place of its own
+    serialisation where given; `lapack`: whether it calls LAPACK's kernels."""
     try:
         from jax.experimental import serialize_executable
 
-        payload, in_tree, exe_out_tree = serialize_executable.serialize(compiled)
-        blob = pickle.dumps((zlib.compress(payload, 1), in_tree, out_tree, exe_out_tree))
+        if code is None:
+            payload, in_tree, exe_out_tree = serialize_executable.serialize(compiled)
+        else:
+            payload, in_tree, exe_out_tree = _serialize_with_code(compiled, code)
+        blob = pickle.dumps((zlib.compress(payload, 1), in_tree, out_tree, exe_out_tree, lapack))
     except Exception:  # noqa: BLE001  (no serialisation: the exported program is kept)
         return
     _write(path, blob)
+
+
+def _serialize_with_code(compiled, code: bytes):
+    """`jax.experimental.serialize_executable.serialize(compiled)`, with `code` as the
+    serialised XLA executable."""
+    from jax._src.lib import _jax, xla_client
+    from jax.experimental import serialize_executable
+
+    class Pickler(serialize_executable._JaxPjrtPickler):
+        def persistent_id(self, obj):
+            if isinstance(obj, (xla_client.LoadedExecutable, _jax.Executable)):
+                return ("exec", code)
+            return super().persistent_id(obj)
+
+    unloaded = compiled._executable._unloaded_executable
+    if unloaded is None or compiled._params.const_args:
+        raise ValueError("this compiled program does not serialise")
+    args_info, in_tree = jax.tree.flatten(compiled.args_info)
+    with io.BytesIO() as file:
+        Pickler(file).dump((unloaded, args_info, compiled._no_kwargs))
+        return file.getvalue(), in_tree, compiled.out_tree

@@ -4,6 +4,7 @@ keeps it off the disk."""
 
 import importlib.util
 import pickle
+import subprocess
 import sys
 import time
 
@@ -80,8 +81,8 @@ def test_a_kept_program_is_loaded_without_tracing_and_gives_the_same_result(tmp_
 
 def test_the_compiled_executable_is_kept_and_loaded_first(tmp_path):
     """Beside the exported program, the executable XLA compiled for this machine: a new
-    caller loads it (no trace, no lowering); a damaged one is removed. (The program adds a
-    number new on each run, so that JAX's own cache cannot serve it.)"""
+    caller loads it (no trace, no lowering); a damaged one is replaced. (The program adds a
+    number new on each run, so that JAX's own cache cannot serve it at first.)"""
     x, y = jnp.arange(3.0), jnp.asarray(2.0)
     model = _model_plus(float(time.time_ns() % 10**12))
     TRACES.clear()
@@ -98,23 +99,13 @@ def test_the_compiled_executable_is_kept_and_loaded_first(tmp_path):
     third = jaxrb.persistent_jit(model, cache_dir=tmp_path)(x, y, 3)
     assert TRACES == [3, 3]
     np.testing.assert_array_equal(third["sum"], out["sum"])
-    assert not executable.exists()  # (JAX's cache served the compile: see below)
     assert program.exists()
-
-
-def test_a_program_with_a_custom_kernel_keeps_no_executable(tmp_path):
-    """LAPACK's kernels are set up when a call to one is lowered: an executable that calls
-    one, loaded by itself in a new process, would crash. Only the exported program is kept."""
-    offset = (time.time_ns() % 10**6) * 1e-12  # new on each run: compiled here, not read back
-
-    def inverse(m):
-        return jnp.linalg.inv(m) + offset
-
-    m = jnp.array([[2.0, 1.0], [1.0, 3.0]])
-    out = jaxrb.persistent_jit(inverse, cache_dir=tmp_path)(m)
-    np.testing.assert_allclose(out - offset, np.linalg.inv(np.asarray(m)), rtol=1e-12)
-    assert len(list(tmp_path.glob("*.bin"))) == 1
-    assert list(tmp_path.glob("*.exe")) == []
+    # kept again, as JAX's cache held it (that cache served the compile): a new caller loads it
+    assert executable.read_bytes() != b"damaged"
+    program.unlink()
+    fourth = jaxrb.persistent_jit(model, cache_dir=tmp_path)(x, y, 3)
+    assert TRACES == [3, 3]
+    np.testing.assert_array_equal(fourth["sum"], out["sum"])
 
 
 def test_an_executable_that_loads_but_does_not_run_is_removed(tmp_path, monkeypatch):
@@ -142,19 +133,61 @@ def test_an_executable_that_loads_but_does_not_run_is_removed(tmp_path, monkeypa
     np.testing.assert_array_equal(again["scaled"], out["scaled"])
 
 
-def test_an_executable_read_from_jax_cache_is_not_kept(tmp_path):
-    """Read back from JAX's persistent cache, an executable serialises without its code
-    (run, its copy fails with "Function ... not found"): only the exported program is kept
-    then, and JAX's cache serves the next caller."""
+_LOAD_ALONE = """
+import sys
+from pathlib import Path
+
+import jax
+import numpy as np
+
+jax.config.update("jax_enable_x64", True)
+from jaxrb._persistent import _load_executable
+
+inputs = np.load(sys.argv[2])
+results = {}
+for name in sys.argv[3:]:
+    args = [inputs[f"{name}_{i}"] for i in range(len(inputs.files)) if f"{name}_{i}" in inputs]
+    avals = [jax.ShapeDtypeStruct(a.shape, a.dtype) for a in args]
+    run, out_tree = _load_executable(Path(inputs[f"{name}_path"].item()), avals)
+    for i, leaf in enumerate(jax.tree.leaves(jax.tree.unflatten(out_tree, run(*args)))):
+        results[f"{name}_{i}"] = np.asarray(leaf)
+np.savez(sys.argv[1], **results)
+"""
+
+
+def test_executables_read_from_jax_cache_or_calling_lapack_run_in_a_new_process(tmp_path):
+    """Two executables a new process loads by themselves and runs: one whose compile JAX's
+    persistent cache served (kept as that cache held it: its own serialisation lacks the
+    code, and run fails with "Function ... not found"), and one calling LAPACK (whose
+    kernels the loading process sets up first: without that, a segmentation fault)."""
     x, y = jnp.arange(3.0), jnp.asarray(2.0)
-    first, second = tmp_path / "first", tmp_path / "second"
+    first, second, third = tmp_path / "first", tmp_path / "second", tmp_path / "third"
     jaxrb.persistent_jit(_model, cache_dir=first)(x, y, 4)  # now in JAX's cache
-    out = jaxrb.persistent_jit(_model, cache_dir=second)(x, y, 4)
-    assert len(list(second.glob("*.bin"))) == 1
-    assert list(second.glob("*.exe")) == []
-    again = jaxrb.persistent_jit(_model, cache_dir=second)(x, y, 4)
-    np.testing.assert_array_equal(again["sum"], out["sum"])
+    out = jaxrb.persistent_jit(_model, cache_dir=second)(x, y, 4)  # served by it
     assert float(out["sum"]) == 0.0 + 1.0 + 16.0 + 2.0
+    offset = (time.time_ns() % 10**6) * 1e-12  # new on each run: compiled here, not read back
+
+    def inverse(m):
+        return jnp.linalg.inv(m) + offset
+
+    m = jnp.array([[2.0, 1.0], [1.0, 3.0]])
+    inv = jaxrb.persistent_jit(inverse, cache_dir=third)(m)
+    np.testing.assert_allclose(inv - offset, np.linalg.inv(np.asarray(m)), rtol=1e-12)
+    (served,) = second.glob("*.exe")
+    (lapack,) = third.glob("*.exe")
+    inputs = {"served_0": x, "served_1": y, "served_path": str(served)}
+    inputs |= {"lapack_0": m, "lapack_path": str(lapack)}
+    np.savez(tmp_path / "inputs.npz", **inputs)
+    results = tmp_path / "results.npz"
+    args = [str(results), str(tmp_path / "inputs.npz"), "served", "lapack"]
+    proc = subprocess.run(
+        [sys.executable, "-c", _LOAD_ALONE, *args], capture_output=True, text=True, timeout=300
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    loaded = np.load(results)
+    np.testing.assert_array_equal(loaded["served_0"], out["scaled"])  # leaves sorted by key
+    np.testing.assert_array_equal(loaded["served_1"], out["sum"])
+    np.testing.assert_array_equal(loaded["lapack_0"], inv)
 
 
 def test_modules_keep_their_static_fields_in_the_key(tmp_path):
