@@ -42,7 +42,6 @@ import functools
 import gc
 import hashlib
 import importlib.metadata
-import io
 import os
 import pickle
 import re
@@ -486,9 +485,10 @@ def _load_or_export(key, fn, static, in_tree, leaves, cache_dir, quiet):
         exported, out_tree, blob = made
         _write(path, blob)
     compiled, code = _compile(exported, avals)
-    kernels = _custom_kernels(exported)
-    if code is not False and all(k.startswith("lapack_") for k in kernels):
-        _keep_executable(executable, compiled, out_tree, code, lapack=bool(kernels))
+    if code is not False:
+        kernels = _custom_kernels(exported)
+        if all(k.startswith("lapack_") for k in kernels):
+            _keep_executable(executable, compiled, out_tree, code, lapack=bool(kernels))
     return compiled, out_tree, None
 
 
@@ -647,20 +647,20 @@ def _keep_executable(path: Path, compiled, out_tree, code=None, lapack=False) ->
 
 def _serialize_with_code(compiled, code: bytes):
     """`jax.experimental.serialize_executable.serialize(compiled)`, with `code` as the
-    serialised XLA executable."""
+    serialised XLA executable (its pickler swapped for the call)."""
     from jax._src.lib import _jax, xla_client
     from jax.experimental import serialize_executable
 
-    class Pickler(serialize_executable._JaxPjrtPickler):
+    pickler = serialize_executable._JaxPjrtPickler
+
+    class WithCode(pickler):
         def persistent_id(self, obj):
             if isinstance(obj, (xla_client.LoadedExecutable, _jax.Executable)):
                 return ("exec", code)
             return super().persistent_id(obj)
 
-    unloaded = compiled._executable._unloaded_executable
-    if unloaded is None or compiled._params.const_args:
-        raise ValueError("this compiled program does not serialise")
-    args_info, in_tree = jax.tree.flatten(compiled.args_info)
-    with io.BytesIO() as file:
-        Pickler(file).dump((unloaded, args_info, compiled._no_kwargs))
-        return file.getvalue(), in_tree, compiled.out_tree
+    serialize_executable._JaxPjrtPickler = WithCode
+    try:
+        return serialize_executable.serialize(compiled)
+    finally:
+        serialize_executable._JaxPjrtPickler = pickler
