@@ -354,6 +354,8 @@ def main(argv=None):
     p.add_argument("--out", default=None)
     p.add_argument("--quick", action="store_true")
     a = p.parse_args(argv)
+    # the CPU compiler settings of `jaxrb run`, without a cache (every compile a cold one)
+    jaxrb.speed_up_compilation(cache=False)
     dtypes = ("float64", "float32") if a.dtype == "both" else (a.dtype,)
     n_coins = a.n_coins if a.n_coins is not None else max(a.n // 4, 1)
     n_poly = a.n_poly if a.n_poly is not None else max(a.n // 4, 1)

@@ -8,7 +8,8 @@ one die (`jaxrb.simulate`), and a batch of `--batch` dice with random spins
 optimised program's size (lines of HLO text) and the steady run time (best of 3), with no
 persistent cache, so every number is a cold start's. XLA's CPU settings are those that
 `jaxrb run` and `jaxrb.speed_up_compilation` choose (the older kernel emitters, no hoisting
-of loop-invariant code), or XLA's defaults with `--xla-defaults`. Writes
+of loop-invariant code, small loops as one kernel, no YNNPACK fusions), or XLA's defaults
+with `--xla-defaults`. Writes
 `compile_times.md`.
 """
 

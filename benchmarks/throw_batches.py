@@ -156,6 +156,8 @@ def main(argv=None):
     p.add_argument("--out", default=None, help="folder for throw_batches.md")
     p.add_argument("--force", action="store_true", help="overwrite an existing result")
     a = p.parse_args(argv)
+    # the CPU compiler settings of `jaxrb run`, without a cache (every compile a cold one)
+    jaxrb.speed_up_compilation(cache=False)
     lanes = [None if x == "default" else int(x) for x in a.lanes.split(",") if x]
     paths = C.output_paths(p, a.out, ["throw_batches.md"], a.force) if a.out else None
     rows, counts = run(a.n, lanes, a.t_end, a.loop)

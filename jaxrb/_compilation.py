@@ -27,6 +27,17 @@ program's entry point (the `jaxrb` command line calls it, and so can a script or
   in 28 ms instead of 171 ms; a die's throw, whose time goes to its 34 impacts, no faster;
   B1's free bodies as before; compile times as before). Also left out where an
   accelerator may run the programs;
+- on the CPU, no YNNPACK library fusions (`--xla_cpu_experimental_ynn_fusion_type=`):
+  XLA hands small float64 matrix products (8 x 8 and up) and the reductions around them to
+  that library, and a loop that holds such a call cannot be compiled as one kernel (above).
+  Without them the impact law's loops (its Gauss-Seidel sweeps and polishing solves, 12 x
+  12) compile whole too (a 2-core x86 CPU, both programs in one process, runs alternating,
+  medians: the default die scene's throw in 68 ms instead of 103 ms, B4's dice 64 ms
+  instead of 91 ms each; B1's free bodies, a coin on its rim and a roulette ball as
+  before; the die's compile up to 10 % longer). A contact simulation's loop over its
+  segments still runs kernel by kernel: it holds a sort (the impact law orders the touching
+  points), and compiled as one kernel it took 145 s instead of 28 s to compile. Left out
+  where an accelerator may run the programs;
 - optionally (`nan_checks`), equinox's run-time checks without host callbacks, so that
   derivative programs compiled by the caller's own `jax.jit` can be cached too;
 - jaxrb's traced programs (`programs`): the persistent cache still needs every program
@@ -55,6 +66,7 @@ SMALL_LOOP_BYTES = 1 << 26
 SMALL_LOOPS_FLAG = (
     f"--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold={SMALL_LOOP_BYTES}"
 )
+LIBRARY_FUSIONS_FLAG = "--xla_cpu_experimental_ynn_fusion_type="
 
 
 def default_cache_dir() -> Path:
@@ -96,7 +108,7 @@ def _cpu_only() -> bool:
 
 def cpu_compiler_flags(flags: str, cpu_only: bool) -> str:
     """`flags` (an `XLA_FLAGS` value) with the CPU settings of the module docstring added,
-    each unless `flags` already sets that option; the loop pass only if `cpu_only`."""
+    each unless `flags` already sets that option; all but the first only if `cpu_only`."""
     added = []
     if "xla_cpu_use_fusion_emitters" not in flags:
         added.append(CPU_FLAG)
@@ -104,6 +116,8 @@ def cpu_compiler_flags(flags: str, cpu_only: bool) -> str:
         added.append(LOOP_HOISTING_FLAG)
     if cpu_only and "xla_backend_extra_options" not in flags:
         added.append(SMALL_LOOPS_FLAG)
+    if cpu_only and "xla_cpu_experimental_ynn_fusion_type" not in flags:
+        added.append(LIBRARY_FUSIONS_FLAG)
     return " ".join([flags.strip(), *added]).strip()
 
 
@@ -119,11 +133,11 @@ def speed_up_compilation(
     `default_cache_dir()`; a contact scene's program takes 0.5-2 MB there, an eager
     operation's a few kB, its size is bounded by `max_cache_mb` below, and the directory can
     be deleted at any time), and, if JAX has not started its CPU backend yet and `XLA_FLAGS`
-    does not choose otherwise, the CPU compiler settings that compile jaxrb's programs
-    fastest (the quicker kernel emitters and, where only the CPU runs programs, no hoisting
-    of loop-invariant code; module docstring). Changes process-wide
-    settings: call it once at the start of a program. Returns the cache directory (None
-    without a cache).
+    does not choose otherwise, the CPU compiler settings of the module docstring (the
+    quicker kernel emitters and, where only the CPU runs programs, no hoisting of
+    loop-invariant code, small loops compiled as one kernel each, no YNNPACK fusions).
+    Changes process-wide settings: call it once at the start of a program. Returns the
+    cache directory (None without a cache).
 
     `nan_checks=True` also makes equinox's run-time checks (`equinox.error_if`, used inside
     diffrax, optimistix and lineax) return NaN where they fail instead of raising through a

@@ -8,6 +8,7 @@ import sys
 
 from jaxrb._compilation import (
     CPU_FLAG,
+    LIBRARY_FUSIONS_FLAG,
     LOOP_HOISTING_FLAG,
     SMALL_LOOPS_FLAG,
     cpu_compiler_flags,
@@ -19,12 +20,14 @@ def test_the_cpu_flags_added_where_only_the_cpu_runs():
         CPU_FLAG,
         LOOP_HOISTING_FLAG,
         SMALL_LOOPS_FLAG,
+        LIBRARY_FUSIONS_FLAG,
     ]
     assert cpu_compiler_flags(" --xla_foo=1 ", cpu_only=True).split() == [
         "--xla_foo=1",
         CPU_FLAG,
         LOOP_HOISTING_FLAG,
         SMALL_LOOPS_FLAG,
+        LIBRARY_FUSIONS_FLAG,
     ]
 
 
@@ -35,7 +38,8 @@ def test_loop_pass_kept_where_an_accelerator_may_run():
 def test_a_users_own_choices_are_left_alone():
     mine = (
         "--xla_cpu_use_fusion_emitters=true --xla_disable_hlo_passes=algsimp "
-        "--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold=0"
+        "--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold=0 "
+        "--xla_cpu_experimental_ynn_fusion_type=individual_dot"
     )
     assert cpu_compiler_flags(mine, cpu_only=True) == mine
 
@@ -43,9 +47,11 @@ def test_a_users_own_choices_are_left_alone():
 # In a process of its own: `speed_up_compilation` changes `XLA_FLAGS` before JAX starts its
 # backend. A loop whose body computes sin(a) from an argument `a` that does not change in the
 # loop: XLA's hoisting pass moves the sine out of the loop; with the pass off it stays in the
-# loop's body. Prints the flags, whether a loop over 32 KB of data became one kernel (a call
-# XLA marks `xla_cpu_small_call`; by default only loops over less than 1 KB do), and whether
-# the sine loop's body (or a computation it calls) holds the sine.
+# loop's body. Prints the flags; whether a loop over 32 KB of data, and one whose body holds
+# an 8 x 8 float64 matrix product, became one kernel each (a call XLA marks
+# `xla_cpu_small_call`; by default only loops over less than 1 KB do, and none that holds a
+# product XLA hands to YNNPACK); and whether the sine loop's body (or a computation it
+# calls) holds the sine.
 _PROBE = """
 import re, sys
 import jax, jax.numpy as jnp
@@ -53,10 +59,14 @@ import jaxrb
 if sys.argv[1] == "on":
     jaxrb.speed_up_compilation(cache=False)
 import os
+jax.config.update("jax_enable_x64", True)
 print(os.environ.get("XLA_FLAGS", ""))
 g = lambda x: jax.lax.fori_loop(0, 5, lambda i, y: jnp.cos(y), x)
 big = jax.jit(g).lower(jnp.ones(4096)).compile().as_text()
 print("one kernel" if "xla_cpu_small_call" in big else "kernels")
+h = lambda m, x: jax.lax.fori_loop(0, 5, lambda i, y: jnp.tanh(m @ y.T), x)
+product = jax.jit(h).lower(jnp.ones((8, 8)), jnp.ones((8, 8))).compile().as_text()
+print("one kernel" if "xla_cpu_small_call" in product else "kernels")
 f = lambda a, x: jax.lax.fori_loop(0, 5, lambda i, y: y + jnp.sin(a), x)
 text = jax.jit(f).lower(jnp.ones(8), jnp.ones(8)).compile().as_text()
 blocks = {}
@@ -93,20 +103,22 @@ def _python(code, platforms, *args):
 
 def _probe(mode):
     out = _python(_PROBE, "cpu", mode).splitlines()
-    return out[-3], out[-2], out[-1]
+    return out[-4], out[-3], out[-2], out[-1]
 
 
 def test_speed_up_compilation_sets_the_cpu_loop_passes():
-    flags, loop, where = _probe("on")
+    flags, loop, product_loop, where = _probe("on")
     assert CPU_FLAG in flags.split() and LOOP_HOISTING_FLAG in flags.split()
-    assert SMALL_LOOPS_FLAG in flags.split()
+    assert SMALL_LOOPS_FLAG in flags.split() and LIBRARY_FUSIONS_FLAG in flags.split()
     assert loop == "one kernel"
+    assert product_loop == "one kernel"
     assert where == "sine in loop"
-    # the probe can tell: without the settings XLA hoists the sine and runs the large loop's
-    # body kernel by kernel
-    flags, loop, where = _probe("off")
-    assert not re.search("xla_disable_hlo_passes|xla_backend_extra_options", flags)
+    # the probe can tell: without the settings XLA hoists the sine and runs both loops'
+    # bodies kernel by kernel
+    flags, loop, product_loop, where = _probe("off")
+    assert not re.search("xla_disable_hlo_passes|xla_backend_extra_options|ynn", flags)
     assert loop == "kernels"
+    assert product_loop == "kernels"
     assert where == "sine hoisted"
 
 
