@@ -224,9 +224,52 @@ def test_impact_law_face_landings(getkey):
     assert np.all(jn[app] > 0)  # where a corner approaches, the impulse pushes
     assert np.all(jt <= np.asarray(mus) * jn * (1 + 1e-6))
     assert np.all(np.asarray(event.impact)[app])
+    used, error = _variants_used(k0, k1, law, event)
+    assert error < 1e-9
     lost = np.asarray(event.energy_lost)
     assert np.all(lost >= -1e-12 * k0), lost.min()
     assert np.all(np.asarray(event.energy_rise) <= 1e-12 * k0)
+
+
+def _variants_used(k0, k1, law, event):
+    """How many impacts of `_face_landings` used each variant of `solve_impacts` (Newton,
+    frictionless, held, plastic) by the event map's rule (Newton-Coulomb unless it adds
+    energy, then frictionless unless that does too, then plastic; the bounce series' limit
+    where the bounces merge), and the largest relative difference between the event's
+    impulse, whose variants were solved only where the rule uses them, and the one the rule
+    picks from all four."""
+    k0, k1 = np.asarray(k0), np.asarray(k1)
+    gains = k1 - k0[:, None] > 1e-12 * k0[:, None]
+    rule = np.where(gains[:, 0], np.where(gains[:, 1], 3, 1), 0)
+    rule = np.where(np.asarray(event.merged), 2, rule)
+    hit = np.asarray(event.impact)
+    expected = np.asarray(law.impulse)[np.arange(len(rule)), rule][hit]
+    scale = np.max(np.abs(expected), axis=-1, keepdims=True)
+    error = np.max(np.abs(np.asarray(event.impulse)[hit] - expected) / scale)
+    return np.bincount(rule[hit], minlength=4), error
+
+
+def test_event_solves_each_impact_variant_where_its_rule_uses_it(getkey):
+    """Face landings where Newton's law can add energy (e = 1, strong friction), where
+    even the frictionless law can (e = 1 without friction: the plastic impulse is used) and
+    where the bounces merge (e near 0): the event map's impulse is the variant its rule
+    picks, though it solves only the variants the rule uses."""
+    n, half = 128, 64
+    batches = [  # (restitution, friction) of 128 landings, twice
+        (jnp.ones(n), jax.random.uniform(getkey(), (n,), minval=1.0, maxval=2.0)),
+        (
+            jnp.concatenate([jnp.ones(half), jax.random.uniform(getkey(), (half,), maxval=0.01)]),
+            jnp.concatenate([jnp.zeros(half), jnp.full(half, 0.5)]),
+        ),
+    ]
+    used, error = 0, 0.0
+    for es, mus in batches:
+        keys = jax.random.split(getkey(), n)
+        k0, k1, law, _, event, _, _ = _face_landings(jax.random.key_data(keys), es, mus)
+        used_here, error_here = _variants_used(k0, k1, law, event)
+        used, error = used + used_here, max(error, error_here)
+    assert np.all(used > 0), used  # every variant's branch ran
+    assert error < 1e-9
 
 
 def test_frictionless_e1_single_point_conserves_energy(getkey):

@@ -24,7 +24,8 @@ unique (a face sliding on four corners: the normal impulses split in many ways) 
 may fail and the Gauss-Seidel solution, which satisfies the conditions to its convergence,
 is kept.
 
-Four variants are solved together: Newton-Coulomb; the frictionless impulse, used where the
+Four variants (`solve_variant` solves one, `solve_impacts` all four; the event map solves
+each only where it uses it): Newton-Coulomb; the frictionless impulse, used where the
 first would add energy (Newton's law with friction can, in rare configurations); the
 frictionless plastic impulse (e = 0), used where even the frictionless one would add energy
 (with several points and e near 1 it can: a point that was separating is held at zero
@@ -39,6 +40,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._body import RigidBody
 from .._linalg import inverse3, solve as small_solve
 from .._quaternion import _safe_norm
 from .._state import State
@@ -217,25 +219,35 @@ def _violation(W, c, target, present, mu, bilateral, lam):
     return jnp.max(jnp.where(present[None, :], bad, 0.0))
 
 
-def solve_impacts(state, geom, points, touching, scene, tol, frames=None, mu=None):
+class ImpactProblem(eqx.Module):
+    """An impact's touching points gathered into `SLOTS` slots: the body, the state before
+    (unit quaternion), the rotation R (body to world) and angular velocity `w` (world,
+    rad/s), the slots' points `r` (S, 3) (world offsets from the mass centre, m), their
+    surface frames `frames` (S, 3, 3) (rows n, t1, t2), which are `present` (S,), and their
+    friction coefficients `mu` (S,)."""
+
+    body: RigidBody
+    state: State
+    R: jax.Array
+    w: jax.Array
+    r: jax.Array
+    frames: jax.Array
+    present: jax.Array
+    mu: jax.Array
+
+
+def impact_problem(state, geom, points, touching, scene, frames=None, mu=None) -> ImpactProblem:
     """The impact at `state` (unit quaternion) at the contact `points` (Q, 3) (world offsets
-    from the mass centre) of which `touching` (Q,) touch the surface, four ways:
-    Newton-Coulomb, frictionless, the limit of a bounce series (frictionless, holding every
-    touching point), and frictionless plastic. Returns an `ImpactOutcome` with a leading
-    axis of `VARIANTS`.
+    from the mass centre) of which `touching` (Q,) touch the surface.
 
     `frames` = (n, t1, t2), each (Q, 3), and `mu` (Q,): each point's surface frame and
     friction coefficient (a surface of several parts); by default the frame of the
     geometry's first point and the surface's friction, for every point."""
-    body = scene.body
-    e = scene.floor.restitution
-    dtype = state.pos.dtype
     Q = points.shape[0]
     if frames is None:
         frames = geom.frame_of(0)
-    frames = tuple(jnp.broadcast_to(x, (Q, 3)) for x in frames)
+    n, t1, t2 = (jnp.broadcast_to(x, (Q, 3)) for x in frames)
     mu = jnp.broadcast_to(scene.floor.friction if mu is None else mu, (Q,))
-    (n, t1, t2), R = frames, geom.R
     # the touching points, gathered into the first slots in an order set by where they are
     # (along a fixed direction of the floor), not by how the shape numbers them: where the
     # impulses are not unique (a face on four corners, with friction) the solution the
@@ -247,62 +259,69 @@ def solve_impacts(state, geom, points, touching, scene, tol, frames=None, mu=Non
     rate = jnp.sum((state.vel + cross(geom.w, points)) * n, axis=-1)
     chosen = jnp.lexsort((where, jnp.where(touching, rate, jnp.inf)))[:SLOTS]
     order = chosen[jnp.argsort(jnp.where(touching[chosen], where[chosen], jnp.inf))]
-    present = touching[order]
-    r = points[order]
-    n, t1, t2, mu = n[order], t1[order], t2[order], mu[order]
-    J, minv, W = _jacobians(body, R, r, n, t1, t2)
-    u = jnp.concatenate([state.vel, geom.w])
-    c = jnp.where(present[:, None], J @ u, 0.0)  # (S, 3)
+    frames = jnp.stack([n[order], t1[order], t2[order]], axis=1)
+    return ImpactProblem(
+        scene.body, state, geom.R, geom.w, points[order], frames, touching[order], mu[order]
+    )
 
-    def variant(e, mu, bilateral):
-        target = jnp.where(present, -e * jnp.minimum(c[:, 0], 0.0), 0.0)
-        # derivatives flow through the polish's exact solve, not through the sweeps
-        lam = _gauss_seidel(W, c, target, present, mu, bilateral, jnp.zeros_like(c), SWEEPS)
-        # polished three ways: a slot that Gauss-Seidel leaves near its cone's edge may stick
-        # (on the edge) or slide; the best (or Gauss-Seidel's own solution) is kept
-        # (a loop over the margins and, below, over the variants, not `jax.vmap`: the same
-        # program, but traced without batching every operation of the polish's unrolled
-        # solve, which was a third of tracing a die's contact program)
-        margins = jnp.array(POLISH_MARGINS, dtype)
-        polished = jax.lax.map(
-            lambda margin: _polish(W, c, target, present, mu, bilateral, lam, margin), margins
-        )
-        tries = jnp.concatenate([lam[None], polished])
-        errors = jax.vmap(lambda x: _violation(W, c, target, present, mu, bilateral, x))(tries)
-        # prefer an exact (polished) solution on ties: derivatives flow through it only
-        best = jnp.argmin(errors.at[0].set(2.0 * errors[0] + tol.velocity))
-        lam = tries[best]
-        speed = jnp.max(jnp.abs(c))
-        return (
-            u + jnp.einsum("ia,iad->d", lam, minv),
-            jnp.einsum("ia,iad->d", lam, J),
-            errors[best] <= 1e-5 * speed + tol.velocity,
-        )
 
-    zero, no_friction = jnp.zeros_like(e), jnp.zeros_like(mu)
-    u_after, generalised, consistent = jax.lax.map(
-        lambda args: variant(*args),
+def solve_variant(problem: ImpactProblem, e, mu, bilateral, tol) -> ImpactOutcome:
+    """The impulses of `problem` with restitution `e`, friction coefficients `mu` (S,) and,
+    where `bilateral`, normal impulses of either sign holding every present point (the
+    limit of a bounce series: e = 0, mu = 0); the state after and what the floor did."""
+    present, state = problem.present, problem.state
+    n, t1, t2 = (problem.frames[:, k] for k in range(3))
+    J, minv, W = _jacobians(problem.body, problem.R, problem.r, n, t1, t2)
+    u = jnp.concatenate([state.vel, problem.w])
+    c = jnp.where(present[:, None], J @ u, 0.0)  # (S, 3) m/s: normal, t1, t2
+    dtype = c.dtype
+    target = jnp.where(present, -e * jnp.minimum(c[:, 0], 0.0), 0.0)
+    # derivatives flow through the polish's exact solve, not through the sweeps
+    lam = _gauss_seidel(W, c, target, present, mu, bilateral, jnp.zeros_like(c), SWEEPS)
+    # polished three ways: a slot that Gauss-Seidel leaves near its cone's edge may stick
+    # (on the edge) or slide; the best (or Gauss-Seidel's own solution) is kept (a loop over
+    # the margins, not `jax.vmap`: the same program, but traced without batching every
+    # operation of the polish's unrolled solve)
+    margins = jnp.array(POLISH_MARGINS, dtype)
+    polished = jax.lax.map(
+        lambda margin: _polish(W, c, target, present, mu, bilateral, lam, margin), margins
+    )
+    tries = jnp.concatenate([lam[None], polished])
+    errors = jax.vmap(lambda x: _violation(W, c, target, present, mu, bilateral, x))(tries)
+    # prefer an exact (polished) solution on ties: derivatives flow through it only
+    best = jnp.argmin(errors.at[0].set(2.0 * errors[0] + tol.velocity))
+    lam = tries[best]
+    consistent = errors[best] <= 1e-5 * jnp.max(jnp.abs(c)) + tol.velocity
+    u_after = u + jnp.einsum("ia,iad->d", lam, minv)
+    generalised = jnp.einsum("ia,iad->d", lam, J)
+    after = State(state.pos, state.quat, u_after[:3], u_after[3:] @ problem.R)  # omega: body
+    impulse, moment = generalised[:3], generalised[3:]
+    # where the impulse acts: the point of its line of action on the tangent plane of the
+    # first slot's point
+    jn = impulse @ n[0]
+    tiny = jnp.finfo(dtype).tiny
+    arm = cross(impulse, moment) / jnp.maximum(jnp.sum(impulse**2), tiny)
+    lowest = problem.r[0]
+    pushes = jn > 0
+    along = ((lowest - arm) @ n[0]) / jnp.where(pushes, jn, 1.0)
+    arm = jnp.where(pushes, arm + impulse * along, lowest)
+    return ImpactOutcome(after, impulse, state.pos + arm, consistent)
+
+
+def solve_impacts(state, geom, points, touching, scene, tol, frames=None, mu=None):
+    """The impact at `state` (unit quaternion) at the contact `points` (Q, 3) (world offsets
+    from the mass centre) of which `touching` (Q,) touch the surface (`impact_problem`),
+    four ways: Newton-Coulomb, frictionless, the limit of a bounce series (frictionless,
+    holding every touching point), and frictionless plastic. Returns an `ImpactOutcome`
+    with a leading axis of `VARIANTS`."""
+    problem = impact_problem(state, geom, points, touching, scene, frames, mu)
+    e = scene.floor.restitution
+    zero, no_friction = jnp.zeros_like(e), jnp.zeros_like(problem.mu)
+    return jax.lax.map(
+        lambda args: solve_variant(problem, *args, tol),
         (
             jnp.stack([e, e, zero, zero]),
-            jnp.stack([mu, no_friction, no_friction, no_friction]),
+            jnp.stack([problem.mu, no_friction, no_friction, no_friction]),
             jnp.array([False, False, True, False]),
         ),
     )
-    states = State(
-        jnp.broadcast_to(state.pos, (VARIANTS, 3)),
-        jnp.broadcast_to(state.quat, (VARIANTS, 4)),
-        u_after[:, :3],
-        u_after[:, 3:] @ R,  # body frame: R^T w for each variant
-    )
-    impulse, moment = generalised[:, :3], generalised[:, 3:]
-    # where the impulse acts: the point of its line of action on the tangent plane of the
-    # first slot's point
-    n = n[0]
-    jn = impulse @ n
-    tiny = jnp.finfo(dtype).tiny
-    arm = cross(impulse, moment) / jnp.maximum(jnp.sum(impulse**2, -1), tiny)[:, None]
-    lowest = r[0]
-    pushes = jn > 0
-    along = ((lowest - arm) @ n) / jnp.where(pushes, jn, 1.0)
-    arm = jnp.where(pushes[:, None], arm + impulse * along[:, None], lowest)
-    return ImpactOutcome(states, impulse, state.pos + arm, consistent)

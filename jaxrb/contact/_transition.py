@@ -10,7 +10,7 @@ from .._invariants import energy
 from .._quaternion import _safe_norm
 from .._state import State
 from ._events import COP, JUNCTION
-from ._impact_law import solve_impacts
+from ._impact_law import VARIANTS, ImpactOutcome, impact_problem, solve_variant
 from ._modes import (
     FACE,
     CandidateTable,
@@ -28,7 +28,8 @@ from ._modes import (
 from ._projection import project_positions, project_velocities
 from ._select import select_mode
 
-NEWTON, FRICTIONLESS, HELD, PLASTIC = 0, 1, 2, 3  # the impact variants of `solve_impacts`
+# the impact variants, in the order `at_event` solves them (`solve_impacts` has its own)
+NEWTON, FRICTIONLESS, PLASTIC, HELD = 0, 1, 2, 3
 
 
 class EventOutcome(eqx.Module):
@@ -59,6 +60,24 @@ class EventOutcome(eqx.Module):
     ambiguous: jax.Array
     energy_rise: jax.Array
     penetration: jax.Array
+
+
+def _zeros_like(tree):
+    return jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), tree)
+
+
+def _index(tree, k):
+    return jax.tree.map(lambda x: x[k], tree)
+
+
+def _put(stacked, one, k):
+    # a dynamic slice, not a scatter: XLA's CPU backend compiles a loop without scatters as
+    # one kernel
+    return jax.lax.dynamic_update_index_in_dim(stacked, one, k, 0)
+
+
+def _where(test, a, b):
+    return jax.tree.map(lambda x, y: jnp.where(test, x, y), a, b)
 
 
 def _kinetic(body, state):
@@ -101,33 +120,61 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol, live=True) -> 
     speed = jnp.max(jnp.where(approaching, -points_rate, 0.0))
     penetration = jnp.maximum(-jnp.min(jnp.where(flat, jnp.inf, geom.gap)), 0.0)
 
-    # the impact three ways; Newton-Coulomb unless it adds energy; its bounce series' limit
-    # (skipped where no member of a batch has an impact: its outcome is used only then)
-    solve = lambda: solve_impacts(state, geom, points, hitting, scene, tol, frames, mu)  # noqa: E731
-    none = lambda: jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), jax.eval_shape(solve))  # noqa: E731
-    hits = only_where_needed(impact, solve, none)
-    pick = lambda k: jax.tree.map(lambda x: x[k], hits)  # noqa: E731
-    newton = pick(NEWTON)
+    # the impact: Newton-Coulomb unless it adds energy, then the frictionless impulse unless
+    # that adds energy too, then the plastic one; where the bounces that follow would merge,
+    # their series' limit. Each solved only where it is used (a loop over the variants, so
+    # that the impact law is traced once)
+    no_problem = lambda: _zeros_like(  # noqa: E731
+        jax.eval_shape(impact_problem, state, geom, points, hitting, scene, frames, mu)
+    )
+    problem = only_where_needed(
+        impact,
+        lambda: impact_problem(state, geom, points, hitting, scene, frames, mu),
+        no_problem,
+    )
     kinetic0 = _kinetic(body, state)
     allowed = 1e-12 * kinetic0 + jnp.finfo(dtype).tiny
-
-    def gains(outcome):
-        return _kinetic(body, outcome.state) - kinetic0 > allowed
-
-    guarded = gains(newton)
-    smooth = pick(FRICTIONLESS)
-    plastic = gains(smooth)
-    smooth = jax.tree.map(lambda a, b: jnp.where(plastic, b, a), smooth, pick(PLASTIC))
-    hit = jax.tree.map(lambda a, b: jnp.where(guarded, b, a), newton, smooth)
-    v, w = hit.state.vel, geom.R @ hit.state.omega
-    leaving = jnp.sum((v + cross(w, points)) * frames[0], axis=-1)
-    bounce = jnp.max(jnp.where(hitting, leaving, 0.0))
     acc0, _ = accelerations(t, state, scene)
     # > 0: the forces press the body onto the surface where it approaches fastest
     fastest = jnp.argmax(jnp.where(approaching, -points_rate, -jnp.inf))
     pressing = -(acc0 @ frames[0][fastest])
-    merged = impact & (pressing > 0) & (bounce > tol.slip_stop) & (bounce < tol.rest_speed)
-    hit = jax.tree.map(lambda a, b: jnp.where(merged, b, a), hit, pick(HELD))
+
+    def outcome_of(variants):
+        """The impact's outcome from the variants solved so far (zeros where not solved),
+        whether Newton's law and then the frictionless one would add energy, whether the
+        bounces that follow merge, and the fastest leaving speed."""
+        gains = lambda out: _kinetic(body, out.state) - kinetic0 > allowed  # noqa: E731
+        newton, smooth = _index(variants, NEWTON), _index(variants, FRICTIONLESS)
+        guarded, plastic = gains(newton), gains(smooth)
+        hit = _where(guarded, _where(plastic, _index(variants, PLASTIC), smooth), newton)
+        v, w = hit.state.vel, geom.R @ hit.state.omega
+        leaving = jnp.sum((v + cross(w, points)) * frames[0], axis=-1)
+        bounce = jnp.max(jnp.where(hitting, leaving, 0.0))
+        merged = impact & (pressing > 0) & (bounce > tol.slip_stop) & (bounce < tol.rest_speed)
+        return hit, guarded, plastic, merged, bounce
+
+    zero = jnp.zeros_like(e)
+    restitution = jnp.stack([e, e, zero, zero])
+    friction = jnp.stack([problem.mu] + 3 * [jnp.zeros_like(problem.mu)])
+    bilateral = jnp.array([False, False, False, True])
+    no_outcome = ImpactOutcome(
+        _zeros_like(state), jnp.zeros(3, dtype), jnp.zeros(3, dtype), jnp.array(False)
+    )
+
+    def solve(variants, k):
+        _, guarded, plastic, merged, _ = outcome_of(variants)
+        needed = impact & jnp.stack([True, guarded, guarded & plastic, merged])[k]
+        out = only_where_needed(
+            needed,
+            lambda: solve_variant(problem, restitution[k], friction[k], bilateral[k], tol),
+            lambda: no_outcome,
+        )
+        return jax.tree.map(lambda all_, one: _put(all_, one, k), variants, out), None
+
+    unsolved = jax.tree.map(lambda x: jnp.stack(VARIANTS * [x]), no_outcome)
+    variants, _ = jax.lax.scan(solve, unsolved, jnp.arange(VARIANTS))
+    hit, guarded, _, merged, bounce = outcome_of(variants)
+    hit = _where(merged, _index(variants, HELD), hit)
     one_minus_e = jnp.where(e < 1, 1 - e, 1.0)
     rest_time = jnp.where(
         merged, t + 2 * bounce / (jnp.where(pressing > 0, pressing, 1.0) * one_minus_e), jnp.inf
