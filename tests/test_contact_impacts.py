@@ -12,6 +12,7 @@ from programs import persistent
 import jaxrb
 from jaxrb.analytic import ball_apex_heights, ball_height, ball_impact_times, ball_rest_time
 from jaxrb.contact._features import contact_model
+from jaxrb.contact._impact_law import FRICTIONLESS, HELD, NEWTON, PLASTIC, VARIANTS
 from jaxrb.contact._modes import flight_mode, geometry
 from jaxrb.contact._transition import at_event
 
@@ -218,9 +219,9 @@ def test_impact_law_face_landings(getkey):
         scale = np.max(np.abs(a), axis=-1, keepdims=True)
         assert np.max(np.abs(a - b) / scale) < 1e-9
     k0, k1 = np.asarray(k0), np.asarray(k1)
-    assert np.all(k1[:, 3] <= k0 * (1 + 1e-12))  # plastic: -Lambda^T W Lambda / 2 <= 0
-    jn = np.asarray(law.impulse[:, 0, 2])
-    jt = np.linalg.norm(np.asarray(law.impulse[:, 0, :2]), axis=1)
+    assert np.all(k1[:, PLASTIC] <= k0 * (1 + 1e-12))  # plastic: -Lambda^T W Lambda / 2 <= 0
+    jn = np.asarray(law.impulse[:, NEWTON, 2])
+    jt = np.linalg.norm(np.asarray(law.impulse[:, NEWTON, :2]), axis=1)
     assert np.all(jn[app] > 0)  # where a corner approaches, the impulse pushes
     assert np.all(jt <= np.asarray(mus) * jn * (1 + 1e-6))
     assert np.all(np.asarray(event.impact)[app])
@@ -240,13 +241,15 @@ def _variants_used(k0, k1, law, event):
     picks from all four."""
     k0, k1 = np.asarray(k0), np.asarray(k1)
     gains = k1 - k0[:, None] > 1e-12 * k0[:, None]
-    rule = np.where(gains[:, 0], np.where(gains[:, 1], 3, 1), 0)
-    rule = np.where(np.asarray(event.merged), 2, rule)
+    rule = np.where(
+        gains[:, NEWTON], np.where(gains[:, FRICTIONLESS], PLASTIC, FRICTIONLESS), NEWTON
+    )
+    rule = np.where(np.asarray(event.merged), HELD, rule)
     hit = np.asarray(event.impact)
     expected = np.asarray(law.impulse)[np.arange(len(rule)), rule][hit]
     scale = np.max(np.abs(expected), axis=-1, keepdims=True)
     error = np.max(np.abs(np.asarray(event.impulse)[hit] - expected) / scale)
-    return np.bincount(rule[hit], minlength=4), error
+    return np.bincount(rule[hit], minlength=VARIANTS), error
 
 
 def test_event_solves_each_impact_variant_where_its_rule_uses_it(getkey):
@@ -291,7 +294,7 @@ def test_frictionless_e1_single_point_conserves_energy(getkey):
         low = int(jnp.argmin(geom.gap))
         touching = jnp.arange(8) == low
         out = jaxrb.contact.solve_impacts(state, geom, geom.r, touching, scene, _LAW_TOL)
-        after = jax.tree.map(lambda x: x[0], out.state)
+        after = jax.tree.map(lambda x: x[NEWTON], out.state)
         w_after = geom.R @ after.omega
         un_before = float(geom.gap_rate[low])
         un_after = float((after.vel + jnp.cross(w_after, geom.r[low]))[2])

@@ -42,6 +42,7 @@ from ._modes import (
     mode_rates,
     no_derivative,
     solve_mode,
+    tree_where,
     unflat,
     unit_state,
 )
@@ -261,8 +262,8 @@ class ContactProgram(eqx.Module):
         # the Painlevé paradox: no contact force exists; the run stops at the state reached
         paradox = do & out.painleve
         moves_on = do & ~paradox
-        mode = jax.tree.map(lambda a, b: jnp.where(moves_on, a, b), out.mode, carry["mode"])
-        y = jax.tree.map(lambda a, b: jnp.where(moves_on, a, b), out.state, carry["y"])
+        mode = tree_where(moves_on, out.mode, carry["mode"])
+        y = tree_where(moves_on, out.state, carry["y"])
         start, values0 = _solve_with_conditions(t0, y, mode, scene, model, tol)
         offsets = start_offsets(values0, cond_tol)
         # the event function and the step limit at the start, carried beside the state
@@ -340,7 +341,7 @@ class ContactProgram(eqx.Module):
         return dict(
             ts=ts,
             t=jnp.where(moved, t_stop, carry["t"]),
-            y=jax.tree.map(lambda a, b: jnp.where(moved, a, b), y_stop, y),
+            y=tree_where(moved, y_stop, y),
             mode=mode,
             trigger=jnp.where(ev, trigger, carry["trigger"]),
             done=done | ~ev | failed,

@@ -51,7 +51,9 @@ SWEEPS = 1000  # most impacts settle in a few; a face sliding on four corners wi
 # friction took 300-450 (60 left one landing unconverged, its outcome then 1e-6 off, set by
 # roundoff and the order of the corners)
 SETTLED = 64  # machine epsilons: a sweep that changes the impulses less has converged
-VARIANTS = 4  # Newton-Coulomb, frictionless, held (bounce-series limit), plastic
+# the variants, as `solve_impacts` returns them (`variant_parameters` gives each one's law)
+NEWTON, FRICTIONLESS, HELD, PLASTIC = range(4)
+VARIANTS = 4
 
 
 class ImpactOutcome(eqx.Module):
@@ -265,6 +267,20 @@ def impact_problem(state, geom, points, touching, scene, frames=None, mu=None) -
     )
 
 
+def variant_parameters(e, mu):
+    """The law of each variant, indexed by `NEWTON`, `FRICTIONLESS`, `HELD`, `PLASTIC`:
+    restitution (VARIANTS,), friction coefficients (VARIANTS, S) from the surface's `e` and
+    the slots' `mu` (S,), and whether the normal impulses hold every point (VARIANTS,)."""
+    law = {
+        NEWTON: (e, mu, False),
+        FRICTIONLESS: (e, jnp.zeros_like(mu), False),
+        HELD: (jnp.zeros_like(e), jnp.zeros_like(mu), True),
+        PLASTIC: (jnp.zeros_like(e), jnp.zeros_like(mu), False),
+    }
+    restitution, friction, bilateral = zip(*(law[k] for k in range(VARIANTS)), strict=True)
+    return jnp.stack(restitution), jnp.stack(friction), jnp.array(bilateral)
+
+
 def solve_variant(problem: ImpactProblem, e, mu, bilateral, tol) -> ImpactOutcome:
     """The impulses of `problem` with restitution `e`, friction coefficients `mu` (S,) and,
     where `bilateral`, normal impulses of either sign holding every present point (the
@@ -315,13 +331,5 @@ def solve_impacts(state, geom, points, touching, scene, tol, frames=None, mu=Non
     holding every touching point), and frictionless plastic. Returns an `ImpactOutcome`
     with a leading axis of `VARIANTS`."""
     problem = impact_problem(state, geom, points, touching, scene, frames, mu)
-    e = scene.floor.restitution
-    zero, no_friction = jnp.zeros_like(e), jnp.zeros_like(problem.mu)
-    return jax.lax.map(
-        lambda args: solve_variant(problem, *args, tol),
-        (
-            jnp.stack([e, e, zero, zero]),
-            jnp.stack([problem.mu, no_friction, no_friction, no_friction]),
-            jnp.array([False, False, True, False]),
-        ),
-    )
+    parameters = variant_parameters(scene.floor.restitution, problem.mu)
+    return jax.lax.map(lambda args: solve_variant(problem, *args, tol), parameters)

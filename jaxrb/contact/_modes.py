@@ -514,6 +514,11 @@ def only_where_needed(needed, compute, otherwise):
     return jax.lax.cond(eqxi.unvmap_any(needed), compute, otherwise)
 
 
+def tree_where(test, a, b):
+    """`a` where `test` holds, else `b`, leaf by leaf (`a`, `b`: the same structure)."""
+    return jax.tree.map(lambda x, y: jnp.where(test, x, y), a, b)
+
+
 def sliding_hats(geom: Geometry, twist, mode: Mode, blend):
     """The directions sliding friction opposes: of s + blend s0 for each slip s (points a, b;
     the face's twist), s0 the mode's unit direction of that slip at the segment's start. Where

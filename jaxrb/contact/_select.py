@@ -27,6 +27,7 @@ from ._modes import (
     point_coefficients,
     sliding_solver,
     solve_mode,
+    tree_where,
     unit_or,
 )
 
@@ -64,8 +65,7 @@ def scan_direction(measure, n, t1, t2, dtype):
         mid = jnp.clip(mid, jnp.minimum(phi_lo, phi_hi), jnp.maximum(phi_lo, phi_hi))
         new = (mid, *at(mid))
         left = jnp.sign(new[1]) == jnp.sign(f_lo)
-        pick = lambda a, b: jax.tree.map(lambda x, y: jnp.where(left, x, y), a, b)  # noqa: E731
-        return pick(new, lo), pick(hi, new)
+        return tree_where(left, new, lo), tree_where(left, hi, new)
 
     nxt_ok = jnp.roll(admissible, -1)
     lo, hi = jax.lax.fori_loop(
@@ -78,9 +78,7 @@ def scan_direction(measure, n, t1, t2, dtype):
         ),
     )
     # the end nearer the root, with what was measured there
-    phi, _, along_root, admissible_root = jax.tree.map(
-        lambda a, b: jnp.where(jnp.abs(lo[1]) < jnp.abs(hi[1]), a, b), lo, hi
-    )
+    phi, _, along_root, admissible_root = tree_where(jnp.abs(lo[1]) < jnp.abs(hi[1]), lo, hi)
     found = jnp.any(good) & (along_root >= 0) & admissible_root
     return jnp.cos(phi) * t1 + jnp.sin(phi) * t2, found
 

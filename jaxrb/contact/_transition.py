@@ -10,7 +10,17 @@ from .._invariants import energy
 from .._quaternion import _safe_norm
 from .._state import State
 from ._events import COP, JUNCTION
-from ._impact_law import VARIANTS, ImpactOutcome, impact_problem, solve_variant
+from ._impact_law import (
+    FRICTIONLESS,
+    HELD,
+    NEWTON,
+    PLASTIC,
+    VARIANTS,
+    ImpactOutcome,
+    impact_problem,
+    solve_variant,
+    variant_parameters,
+)
 from ._modes import (
     FACE,
     CandidateTable,
@@ -23,13 +33,15 @@ from ._modes import (
     point_coefficients,
     point_gaps,
     solve_mode,
+    tree_where,
     unit_state,
 )
 from ._projection import project_positions, project_velocities
 from ._select import select_mode
 
-# the impact variants, in the order `at_event` solves them (`solve_impacts` has its own)
-NEWTON, FRICTIONLESS, PLASTIC, HELD = 0, 1, 2, 3
+# the order in which `at_event` solves the impact variants: each one's need is known from
+# those before it
+SOLVING_ORDER = (NEWTON, FRICTIONLESS, PLASTIC, HELD)
 
 
 class EventOutcome(eqx.Module):
@@ -74,10 +86,6 @@ def _put(stacked, one, k):
     # a dynamic slice, not a scatter: XLA's CPU backend compiles a loop without scatters as
     # one kernel
     return jax.lax.dynamic_update_index_in_dim(stacked, one, k, 0)
-
-
-def _where(test, a, b):
-    return jax.tree.map(lambda x, y: jnp.where(test, x, y), a, b)
 
 
 def _kinetic(body, state):
@@ -146,24 +154,22 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol, live=True) -> 
         gains = lambda out: _kinetic(body, out.state) - kinetic0 > allowed  # noqa: E731
         newton, smooth = _index(variants, NEWTON), _index(variants, FRICTIONLESS)
         guarded, plastic = gains(newton), gains(smooth)
-        hit = _where(guarded, _where(plastic, _index(variants, PLASTIC), smooth), newton)
+        hit = tree_where(guarded, tree_where(plastic, _index(variants, PLASTIC), smooth), newton)
         v, w = hit.state.vel, geom.R @ hit.state.omega
         leaving = jnp.sum((v + cross(w, points)) * frames[0], axis=-1)
         bounce = jnp.max(jnp.where(hitting, leaving, 0.0))
         merged = impact & (pressing > 0) & (bounce > tol.slip_stop) & (bounce < tol.rest_speed)
         return hit, guarded, plastic, merged, bounce
 
-    zero = jnp.zeros_like(e)
-    restitution = jnp.stack([e, e, zero, zero])
-    friction = jnp.stack([problem.mu] + 3 * [jnp.zeros_like(problem.mu)])
-    bilateral = jnp.array([False, False, False, True])
+    restitution, friction, bilateral = variant_parameters(e, problem.mu)
     no_outcome = ImpactOutcome(
         _zeros_like(state), jnp.zeros(3, dtype), jnp.zeros(3, dtype), jnp.array(False)
     )
 
     def solve(variants, k):
         _, guarded, plastic, merged, _ = outcome_of(variants)
-        needed = impact & jnp.stack([True, guarded, guarded & plastic, merged])[k]
+        rule = {NEWTON: True, FRICTIONLESS: guarded, PLASTIC: guarded & plastic, HELD: merged}
+        needed = impact & jnp.stack([rule[v] for v in range(VARIANTS)])[k]
         out = only_where_needed(
             needed,
             lambda: solve_variant(problem, restitution[k], friction[k], bilateral[k], tol),
@@ -172,14 +178,14 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol, live=True) -> 
         return jax.tree.map(lambda all_, one: _put(all_, one, k), variants, out), None
 
     unsolved = jax.tree.map(lambda x: jnp.stack(VARIANTS * [x]), no_outcome)
-    variants, _ = jax.lax.scan(solve, unsolved, jnp.arange(VARIANTS))
+    variants, _ = jax.lax.scan(solve, unsolved, jnp.array(SOLVING_ORDER))
     hit, guarded, _, merged, bounce = outcome_of(variants)
-    hit = _where(merged, _index(variants, HELD), hit)
+    hit = tree_where(merged, _index(variants, HELD), hit)
     one_minus_e = jnp.where(e < 1, 1 - e, 1.0)
     rest_time = jnp.where(
         merged, t + 2 * bounce / (jnp.where(pressing > 0, pressing, 1.0) * one_minus_e), jnp.inf
     )
-    state = jax.tree.map(lambda a, b: jnp.where(impact, a, b), hit.state, state)
+    state = tree_where(impact, hit.state, state)
 
     # the next mode (a flat cap's rim needs to know where the body tips: the seed)
     if model.needs_seed:
