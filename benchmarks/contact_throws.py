@@ -42,6 +42,7 @@ Run: python -m benchmarks.contact_throws --n 1000 --out bench_out
 """
 
 import argparse
+import functools
 import os
 import time
 
@@ -75,6 +76,10 @@ SHAPES = {
 DICE_DENSITY = 0.0045 / 0.016**3  # kg/m^3, that of the cube die
 
 
+DICE = {f"d{sides}": sides for sides in (4, 8, 12, 20)}
+PLURAL.update({name: f"{name} dice" for name in DICE})
+
+
 def _polyhedral_die(sides):
     """(mass, shape, inradius, T) of the regular die with `sides` faces (jaxrb.dice sizes)."""
     shape = jaxrb.dice.BUILDERS[sides]().shape
@@ -85,9 +90,6 @@ def _polyhedral_die(sides):
     return (DICE_DENSITY * float(shape.volume), lambda: shape, inradius, 4.0)
 
 
-for _sides in (4, 8, 12, 20):
-    SHAPES[f"d{_sides}"] = _polyhedral_die(_sides)
-    PLURAL[f"d{_sides}"] = f"d{_sides} dice"
 # a ball (20 mm, 50 g) thrown into a bowl of radius 0.3 m or onto a cone of inclination
 # 0.3 rad (its apex rounded, radius 5 cm), with rolling resistance 0.01: the curved
 # surfaces (docs/contact.md, section 8)
@@ -110,7 +112,16 @@ FLOORS = {
     ),
 }
 DEFAULT_SHAPES = "die,coin"
-DICE = {f"d{sides}": sides for sides in (4, 8, 12, 20)}
+KINDS = ("die", "coin", *DICE, "ball_in_bowl", "ball_on_cone", "ball_on_wheel")
+
+
+@functools.cache
+def shape_of(kind):
+    """(mass (kg), a function making the shape, the lowest height of the mass centre on the
+    floor (m), T (s)) of `kind`. The polyhedral dice are built when first asked for, not at
+    import: building one runs JAX, which would start its backend before `main` can choose
+    the CPU compiler settings."""
+    return _polyhedral_die(DICE[kind]) if kind in DICE else SHAPES[kind]
 
 
 def throws(n, seed, uniform_attitude=False):
@@ -141,7 +152,7 @@ def throws(n, seed, uniform_attitude=False):
 def run(kind, n, seed, chunk, rtol, max_impacts):
     """Simulate n throws of `kind` in chunks of `chunk` bodies (one compilation; progress
     printed per chunk). Returns the outputs, the compile time and the run time (s)."""
-    mass, make_shape, _, t_end = SHAPES[kind]
+    mass, make_shape, _, t_end = shape_of(kind)
     shape = make_shape()
     ts = jnp.linspace(0.0, t_end, round(t_end / SAVE_INTERVAL) + 1)
 
@@ -187,7 +198,7 @@ def checks(out, kind, rtol, contact_tol=1e-9):
     tr, lowest, energy = (jax.tree.map(np.asarray, x) for x in out)
     ts = np.asarray(tr.ts[0])
     dt = np.diff(ts)
-    mass, make_shape, lowest_centre, _ = SHAPES[kind]
+    mass, make_shape, lowest_centre, _ = shape_of(kind)
     inertia = jaxrb.RigidBody(mass, shape=make_shape()).inertia_matrix
     smallest_moment = float(np.min(np.linalg.eigvalsh(np.asarray(inertia))))
     # energy on the scale of the throw: its initial energy plus m g 1 cm
@@ -283,7 +294,7 @@ def main(argv=None):
     p.add_argument(
         "--shapes",
         default=DEFAULT_SHAPES,
-        help=f"comma-separated, of: {', '.join(SHAPES)} (die: the cube as a Box)",
+        help=f"comma-separated, of: {', '.join(KINDS)} (die: the cube as a Box)",
     )
     p.add_argument(
         "--chunk",
@@ -298,10 +309,12 @@ def main(argv=None):
     p.add_argument("--out", default="bench_out")
     p.add_argument("--force", action="store_true", help="overwrite earlier results")
     args = p.parse_args(argv)
+    # the CPU compiler settings of `jaxrb run`, without a cache (every compile a cold one)
+    jaxrb.speed_up_compilation(cache=False)
     shapes = args.shapes.split(",")
     for kind in shapes:
-        if kind not in SHAPES:
-            p.error(f"--shapes: unknown shape {kind!r} (known: {', '.join(SHAPES)})")
+        if kind not in KINDS:
+            p.error(f"--shapes: unknown shape {kind!r} (known: {', '.join(KINDS)})")
     default = args.shapes == DEFAULT_SHAPES
     stem = "contact_throws" if default else "contact_throws_" + "_".join(shapes)
     names = [stem + ".md", stem + ".png"] + [f"contact_throws_{kind}.npz" for kind in shapes]

@@ -139,6 +139,8 @@ def main(argv=None):
         "(default: one throw per call through jaxrb.sweep)",
     )
     a = p.parse_args(argv)
+    # the CPU compiler settings of `jaxrb run`, without a cache (every compile a cold one)
+    jaxrb.speed_up_compilation(cache=False)
     names = ("dice_fairness_all.md", "dice_fairness_all.png", "dice_fairness_all.npz")
     paths = C.output_paths(p, a.out, names, a.force)
     results, seconds, saved = {}, {}, {}

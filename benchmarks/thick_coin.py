@@ -196,6 +196,8 @@ def main(argv=None):
     p.add_argument("--chunk", type=int, default=1, help="throws per compiled (vmapped) call")
     p.add_argument("--rows", default=None, help="keep finished chunks here (a rerun resumes)")
     a = p.parse_args(argv)
+    # the CPU compiler settings of `jaxrb run`, without a cache (every compile a cold one)
+    jaxrb.speed_up_compilation(cache=False)
     ratios = [float(x) for x in a.ratios.split(",")]
     names = ["thick_coin.md", "thick_coin.png", "thick_coin.npz"]
     paths = C.output_paths(p, a.out, names, a.force)

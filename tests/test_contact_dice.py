@@ -132,8 +132,8 @@ def test_die_batch_vmap_equals_per_member(getkey):
     # roundoff (1e-16, seen before the first impact), and a tumbling die amplifies any 1e-16
     # change through the adaptive step sequence and each bounce (measured: a 1e-15 relative
     # change of the initial spin moves the state at t = 0.15 s by up to 1e-7 relative). So
-    # each member is compared with its own run and with that run's response to such a change.
-    for i in (0, 1, int(np.argmax(counts)), int(np.argmin(counts))):
+    # each member is compared with its own run and with that run's responses to such changes.
+    for i in range(len(counts)):
         _assert_member_is_its_own_run(run, batch, i, omegas[i], heights[i])
 
 
@@ -145,15 +145,25 @@ def _rel(a, b):
     )
 
 
+# relative changes of a run's initial spin and height, a few to a hundred units of roundoff
+NUDGES = (1e-15, -1e-15, 2e-15, -2e-15, 5e-15, -5e-15, 1e-14, -1e-14, 2e-14, -2e-14)
+
+
 def _assert_member_is_its_own_run(run, batch, i, omega, z):
-    """Member i of `batch` equals `run(omega, z)` up to that run's response to a 1e-15
-    relative change of the spin, with the same impacts at the same times (1e-9 s)."""
+    """Member i of `batch` equals `run(omega, z)` up to roundoff's effect on that run, with
+    the same impacts at the same times (1e-9 s). Roundoff's effect is estimated as the
+    largest of the run's responses to the `NUDGES` of its spin and of its height: one such
+    response is no estimate of it, as they vary by up to two orders of magnitude from one
+    nudge to the next (measured on one of these throws: 1.4e-12 median, 1.3e-10 largest)."""
     count = int(batch.impacts.count[i])
     one = run(omega, z)
     assert int(one.impacts.count) == count
-    nudged = run(omega * (1 + 1e-15), z)
+    spread = max(
+        [_rel(one.states, run(omega * (1 + d), z).states) for d in NUDGES]
+        + [_rel(one.states, run(omega, z * (1 + d)).states) for d in NUDGES]
+    )
     member = jax.tree.map(lambda x: x[i], batch.states)
-    assert _rel(one.states, member) <= 10 * _rel(one.states, nudged.states) + 1e-12
+    assert _rel(one.states, member) <= 10 * spread + 1e-12
     np.testing.assert_allclose(
         np.asarray(one.impacts.time[:count]),
         np.asarray(batch.impacts.time[i, :count]),
