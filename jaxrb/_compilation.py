@@ -20,13 +20,16 @@ program's entry point (the `jaxrb` command line calls it, and so can a script or
   not `cpu`), where it has not been measured;
 - on the CPU, every while loop whose operations XLA can emit itself (no library call: a
   matrix product it hands to Eigen, a custom call, a scatter) compiled as one kernel, loop
-  and body together, up to `SMALL_LOOP_BYTES` of data accessed (XLA's default is 1 KB): a
-  contact simulation's solver loop then runs without a kernel launch per fused operation
-  (a 2-core x86 CPU: a coin rolling on its rim for 1 s at tolerance 1e-12, 16552 steps, in
-  0.37-0.42 s instead of 1.53 s; a roulette ball's first second on the wall, 1048 steps,
-  in 28 ms instead of 171 ms; a die's throw, whose time goes to its 34 impacts, no faster;
-  B1's free bodies as before; compile times as before). Also left out where an
-  accelerator may run the programs;
+  and body together, up to `SMALL_LOOP_BYTES` of data accessed in one pass of its body
+  (XLA's default is 1 KB): a contact simulation's solver loop then runs without a kernel
+  launch per fused operation (a 2-core x86 CPU: a coin rolling on its rim for 1 s at
+  tolerance 1e-12, 16552 steps, in 0.37-0.42 s instead of 1.53 s; a roulette ball's first
+  second on the wall, 1048 steps, in 28 ms instead of 171 ms; B1's free bodies as before;
+  compile times as before). The bound, 256 KB: on a 2-core AMD EPYC B4's dice, coins and a
+  roulette ball ran as fast with 128 KB as with 64 MB (a die's throw 8.9 ms, twice as long
+  with 32 KB), while from 1 MB up a fit's loop of iterations, which holds a whole contact
+  simulation and its derivatives, became one kernel too and `fit_contact`'s first call
+  took 72-77 s instead of 26 s. Also left out where an accelerator may run the programs;
 - on the CPU, no YNNPACK library fusions (`--xla_cpu_experimental_ynn_fusion_type=`):
   XLA hands small float64 matrix products (8 x 8 and up) and the reductions around them to
   that library, and a loop that holds such a call cannot be compiled as one kernel (above).
@@ -62,7 +65,7 @@ from ._persistent import keep_programs
 
 CPU_FLAG = "--xla_cpu_use_fusion_emitters=false"
 LOOP_HOISTING_FLAG = "--xla_disable_hlo_passes=while-loop-invariant-code-motion"
-SMALL_LOOP_BYTES = 1 << 26
+SMALL_LOOP_BYTES = 1 << 18  # 256 KB
 SMALL_LOOPS_FLAG = (
     f"--xla_backend_extra_options=xla_cpu_small_while_loop_byte_threshold={SMALL_LOOP_BYTES}"
 )

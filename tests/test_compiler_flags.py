@@ -47,11 +47,11 @@ def test_a_users_own_choices_are_left_alone():
 # In a process of its own: `speed_up_compilation` changes `XLA_FLAGS` before JAX starts its
 # backend. A loop whose body computes sin(a) from an argument `a` that does not change in the
 # loop: XLA's hoisting pass moves the sine out of the loop; with the pass off it stays in the
-# loop's body. Prints the flags; whether a loop over 32 KB of data, and one whose body holds
-# an 8 x 8 float64 matrix product, became one kernel each (a call XLA marks
-# `xla_cpu_small_call`; by default only loops over less than 1 KB do, and none that holds a
-# product XLA hands to YNNPACK); and whether the sine loop's body (or a computation it
-# calls) holds the sine.
+# loop's body. Prints the flags; whether a loop over 32 KB of data, one over 1 MB (more than
+# `SMALL_LOOP_BYTES`) and one whose body holds an 8 x 8 float64 matrix product became one
+# kernel each (a call XLA marks `xla_cpu_small_call`; by default only loops over less than
+# 1 KB do, and none that holds a product XLA hands to YNNPACK); and whether the sine loop's
+# body (or a computation it calls) holds the sine.
 _PROBE = """
 import re, sys
 import jax, jax.numpy as jnp
@@ -64,6 +64,8 @@ print(os.environ.get("XLA_FLAGS", ""))
 g = lambda x: jax.lax.fori_loop(0, 5, lambda i, y: jnp.cos(y), x)
 big = jax.jit(g).lower(jnp.ones(4096)).compile().as_text()
 print("one kernel" if "xla_cpu_small_call" in big else "kernels")
+huge = jax.jit(g).lower(jnp.ones(131072)).compile().as_text()
+print("one kernel" if "xla_cpu_small_call" in huge else "kernels")
 h = lambda m, x: jax.lax.fori_loop(0, 5, lambda i, y: jnp.tanh(m @ y.T), x)
 product = jax.jit(h).lower(jnp.ones((8, 8)), jnp.ones((8, 8))).compile().as_text()
 print("one kernel" if "xla_cpu_small_call" in product else "kernels")
@@ -102,22 +104,22 @@ def _python(code, platforms, *args):
 
 
 def _probe(mode):
-    out = _python(_PROBE, "cpu", mode).splitlines()
-    return out[-4], out[-3], out[-2], out[-1]
+    return _python(_PROBE, "cpu", mode).splitlines()[-5:]
 
 
 def test_speed_up_compilation_sets_the_cpu_loop_passes():
-    flags, loop, product_loop, where = _probe("on")
+    flags, loop, large_loop, product_loop, where = _probe("on")
     assert CPU_FLAG in flags.split() and LOOP_HOISTING_FLAG in flags.split()
     assert SMALL_LOOPS_FLAG in flags.split() and LIBRARY_FUSIONS_FLAG in flags.split()
     assert loop == "one kernel"
+    assert large_loop == "kernels"  # above the bound: kernel by kernel, as by default
     assert product_loop == "one kernel"
     assert where == "sine in loop"
     # the probe can tell: without the settings XLA hoists the sine and runs both loops'
     # bodies kernel by kernel
-    flags, loop, product_loop, where = _probe("off")
+    flags, loop, large_loop, product_loop, where = _probe("off")
     assert not re.search("xla_disable_hlo_passes|xla_backend_extra_options|ynn", flags)
-    assert loop == "kernels"
+    assert loop == "kernels" and large_loop == "kernels"
     assert product_loop == "kernels"
     assert where == "sine hoisted"
 
