@@ -27,9 +27,10 @@ program's entry point (the `jaxrb` command line calls it, and so can a script or
   second on the wall, 1048 steps, in 28 ms instead of 171 ms; B1's free bodies as before;
   compile times as before). The bound, 256 KB: on a 2-core AMD EPYC B4's dice, coins and a
   roulette ball ran as fast with 128 KB as with 64 MB (a die's throw 8.9 ms, twice as long
-  with 32 KB), while from 1 MB up a fit's loop of iterations, which holds a whole contact
-  simulation and its derivatives, became one kernel too and `fit_contact`'s first call
-  took 72-77 s instead of 26 s. Also left out where an accelerator may run the programs;
+  with 32 KB), while from 1 MB up the loop over a contact simulation's segments inside a
+  fit (with its forward derivatives: 26 thousand of the program's 28 thousand lines of
+  HLO) became one kernel too, and `fit_contact`'s first call took 72-85 s instead of
+  26 s. Also left out where an accelerator may run the programs;
 - on the CPU, no YNNPACK library fusions (`--xla_cpu_experimental_ynn_fusion_type=`):
   XLA hands small float64 matrix products (8 x 8 and up) and the reductions around them to
   that library, and a loop that holds such a call cannot be compiled as one kernel (above).
