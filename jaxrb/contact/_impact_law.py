@@ -52,8 +52,8 @@ SWEEPS = 1000  # most impacts settle in a few; a face sliding on four corners wi
 # roundoff and the order of the corners)
 SETTLED = 64  # machine epsilons: a sweep that changes the impulses less has converged
 # the variants, as `solve_impacts` returns them (`variant_parameters` gives each one's law)
-NEWTON, FRICTIONLESS, HELD, PLASTIC = range(4)
 VARIANTS = 4
+NEWTON, FRICTIONLESS, HELD, PLASTIC = range(VARIANTS)
 
 
 class ImpactOutcome(eqx.Module):

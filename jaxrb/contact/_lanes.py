@@ -33,6 +33,7 @@ from .._scene import with_inertia_inverse
 from .._solver_settings import solver_settings
 from .._state import State
 from ._driver import check_contact_scene, contact_program, run_throw
+from ._modes import tree_index
 from ._options import ContactOptions
 
 DEFAULT_LANES = 64  # on a GPU
@@ -174,14 +175,14 @@ def _throws(scene, states0, ts, settings, options, tol, lanes, batched_scene):
     scene = with_inertia_inverse(scene)
 
     def scene_of(i):
-        return jax.tree.map(lambda x: x[i], scene) if batched_scene else scene
+        return tree_index(scene, i) if batched_scene else scene
 
     def program_of(s):
         return contact_program(s, settings, options, tol)
 
     def start(i):
         s = scene_of(i)
-        return program_of(s).start(s, jax.tree.map(lambda x: x[i], states0), ts)
+        return program_of(s).start(s, tree_index(states0, i), ts)
 
     def advance(i, carry):
         s = scene_of(i)
@@ -193,7 +194,7 @@ def _throws(scene, states0, ts, settings, options, tol, lanes, batched_scene):
     if lanes == 1:  # one throw after another, each through `simulate`'s own program
 
         def one(i):
-            state0 = jax.tree.map(lambda x: x[i], states0)
+            state0 = tree_index(states0, i)
             return run_throw(scene_of(i), state0, ts, settings, options, tol, "lax")
 
         return map_throws(one, jnp.arange(n))

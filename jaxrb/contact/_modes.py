@@ -519,6 +519,11 @@ def tree_where(test, a, b):
     return jax.tree.map(lambda x, y: jnp.where(test, x, y), a, b)
 
 
+def tree_index(tree, i):
+    """Entry `i` of every leaf's leading axis."""
+    return jax.tree.map(lambda x: x[i], tree)
+
+
 def sliding_hats(geom: Geometry, twist, mode: Mode, blend):
     """The directions sliding friction opposes: of s + blend s0 for each slip s (points a, b;
     the face's twist), s0 the mode's unit direction of that slip at the segment's start. Where

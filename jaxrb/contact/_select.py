@@ -27,6 +27,7 @@ from ._modes import (
     point_coefficients,
     sliding_solver,
     solve_mode,
+    tree_index,
     tree_where,
     unit_or,
 )
@@ -421,7 +422,7 @@ def select_mode(
     first = jnp.where(jnp.any(plain), jnp.argmax(plain), jnp.argmax(ok))
     i = jnp.where(any_ok, first, jnp.argmin(jnp.where(admissible, violation, jnp.inf)))
     return Choice(
-        mode=jax.tree.map(lambda x: x[i], modes),
+        mode=tree_index(modes, i),
         consistent=any_ok,
         painleve=painleve,
         ambiguous=ambiguous,

@@ -33,6 +33,7 @@ from ._modes import (
     point_coefficients,
     point_gaps,
     solve_mode,
+    tree_index,
     tree_where,
     unit_state,
 )
@@ -76,10 +77,6 @@ class EventOutcome(eqx.Module):
 
 def _zeros_like(tree):
     return jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), tree)
-
-
-def _index(tree, k):
-    return jax.tree.map(lambda x: x[k], tree)
 
 
 def _put(stacked, one, k):
@@ -152,9 +149,10 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol, live=True) -> 
         whether Newton's law and then the frictionless one would add energy, whether the
         bounces that follow merge, and the fastest leaving speed."""
         gains = lambda out: _kinetic(body, out.state) - kinetic0 > allowed  # noqa: E731
-        newton, smooth = _index(variants, NEWTON), _index(variants, FRICTIONLESS)
+        newton, smooth = tree_index(variants, NEWTON), tree_index(variants, FRICTIONLESS)
         guarded, plastic = gains(newton), gains(smooth)
-        hit = tree_where(guarded, tree_where(plastic, _index(variants, PLASTIC), smooth), newton)
+        smooth = tree_where(plastic, tree_index(variants, PLASTIC), smooth)
+        hit = tree_where(guarded, smooth, newton)
         v, w = hit.state.vel, geom.R @ hit.state.omega
         leaving = jnp.sum((v + cross(w, points)) * frames[0], axis=-1)
         bounce = jnp.max(jnp.where(hitting, leaving, 0.0))
@@ -180,7 +178,7 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol, live=True) -> 
     unsolved = jax.tree.map(lambda x: jnp.stack(VARIANTS * [x]), no_outcome)
     variants, _ = jax.lax.scan(solve, unsolved, jnp.array(SOLVING_ORDER))
     hit, guarded, _, merged, bounce = outcome_of(variants)
-    hit = tree_where(merged, _index(variants, HELD), hit)
+    hit = tree_where(merged, tree_index(variants, HELD), hit)
     one_minus_e = jnp.where(e < 1, 1 - e, 1.0)
     rest_time = jnp.where(
         merged, t + 2 * bounce / (jnp.where(pressing > 0, pressing, 1.0) * one_minus_e), jnp.inf
