@@ -1,5 +1,6 @@
-"""The sliding solver of the mode selection (`SlidingSolver`: a mode's solution for any
-sliding directions by a 2 x 2 Woodbury update) against the direct 6 x 6 solve."""
+"""The mode selection: its sliding solver (`SlidingSolver`: a mode's solution for any sliding
+directions by a 2 x 2 Woodbury update) against the direct 6 x 6 solve, and its choice (the
+candidates of the resting points, tested a chunk at a time) against testing every mode."""
 
 import jax
 import jax.numpy as jnp
@@ -74,3 +75,121 @@ def test_sliding_solver_equals_the_direct_solve():
         # the directions matter: some candidates' forces differ from those without friction
         change = np.max(np.abs(np.asarray(direct[0]) - np.asarray(plain)))
         assert change > 1e-2 * np.max(np.abs(np.asarray(plain)))
+
+
+# ------------------------------------------------- the mode choice against testing every mode
+
+CHOICE_SHAPES = (jaxrb.Box((0.008, 0.006, 0.004)), jaxrb.dice.d12(0.01).shape)
+
+
+def _resting_states(model, key, n):
+    """`n` states of the shape of `model` resting on the floor (its lowest point at height 0,
+    no normal speed there) on its first face, one of that face's edges or one of its
+    corners in turn, with random slips and spins, every fourth without any slip (a slide
+    would start from rest)."""
+    corners = np.asarray(model.corners)
+    normal = np.asarray(model.normals[0])
+    face = list(model.face_points[0])
+    # the attitude that turns the first face down
+    axis = np.cross(normal, [0.0, 0.0, -1.0])
+    angle = np.arccos(np.clip(-normal[2], -1.0, 1.0))
+    axis = axis / np.linalg.norm(axis) if np.linalg.norm(axis) > 1e-12 else np.array([1.0, 0, 0])
+    base = jaxrb.axis_angle_to_quat(jnp.asarray(axis), angle)
+    world = np.asarray(corners @ np.asarray(jaxrb.quat_to_matrix(base)).T)
+    a, b = next((a, b) for a, b in model.pairs if a in face and b in face)
+    centre = world[face].mean(axis=0)
+    # tilt axes (world, horizontal) that lift the face off all but the edge (a, b) or corner a
+    edge = (world[b] - world[a]) / np.linalg.norm(world[b] - world[a])
+    edge = edge if np.cross(edge, centre - 0.5 * (world[a] + world[b]))[2] > 0 else -edge
+    corner = np.cross(centre - world[a], [0.0, 0.0, 1.0])
+    corner = corner / np.linalg.norm(corner)
+    axes = jnp.asarray(np.stack([edge, edge, corner]))  # (the face's unused)
+    support = jnp.arange(n) % 3  # 0 face, 1 edge, 2 corner
+    k = jax.random.split(key, 6)
+    tilt = jnp.where(support == 0, 0.0, jax.random.uniform(k[0], (n,), minval=0.2, maxval=0.6))
+    yaw = jax.random.uniform(k[1], (n,), maxval=2 * np.pi)
+    still = (jnp.arange(n) // 3) % 4 == 0
+    vxy = jnp.where(still[:, None], 0.0, 0.05 * jax.random.normal(k[2], (n, 2)))
+    spin = jnp.where(still, 0.0, 3.0 * jax.random.normal(k[3], (n,)))
+    roll = jnp.where(still | (support == 0), 0.0, 2.0 * jax.random.normal(k[4], (n,)))
+    wild = jnp.where(((support == 2) & ~still)[:, None], jax.random.normal(k[5], (n, 3)), 0.0)
+    up = jnp.array([0.0, 0.0, 1.0])
+
+    def place(s, tilt, yaw, v, spin, roll, wild):
+        turn = jaxrb.quat_multiply(
+            jaxrb.axis_angle_to_quat(up, yaw), jaxrb.axis_angle_to_quat(axes[s], tilt)
+        )
+        q = jaxrb.quat_multiply(turn, base)
+        R = jaxrb.quat_to_matrix(q)
+        r = R @ jnp.asarray(corners[a])  # a point of the support (world, from the centre)
+        Y = jaxrb.quat_to_matrix(jaxrb.axis_angle_to_quat(up, yaw))
+        w = Y @ (roll * axes[s] + wild) + spin * up
+        pos = jnp.array([0.0, 0.0, -r[2]])
+        vel = jnp.array([v[0], v[1], -jnp.cross(w, r)[2]])
+        return jaxrb.State(pos, q, vel, R.T @ w)
+
+    return jax.vmap(place)(support, tilt, yaw, vxy, spin, roll, wild)
+
+
+@persistent(static_argnames="which")
+def _choices(which, states, friction):
+    """The mode `select_mode` chooses (chunks in the table's order, stopping early) and the
+    one chosen by testing every mode of the table, for resting states of
+    `CHOICE_SHAPES[which]`."""
+    from jaxrb.contact._select import _candidate, exclusions, select_mode
+
+    shape = CHOICE_SHAPES[which]
+    model = contact_model(shape)
+    table = CandidateTable(model)
+    old = flight_mode(jnp.float64)
+    trigger = jnp.array(-1)
+
+    def one(state, mu):
+        scene = _scene(shape, mu)
+        geom = geometry(state, scene, model, old.seed, old.side)
+        flat = jnp.asarray(model.flat_points)
+        touching = geom.gap <= jnp.where(flat, TOL.flat, TOL.contact)
+        resting = touching & (jnp.abs(geom.gap_rate) <= TOL.slip_stop)
+        zero_slip = jnp.linalg.norm(geom.slip, axis=-1) <= TOL.slip_stop
+        args = (0.0, state, geom, old, trigger, scene, model, table, TOL, resting, zero_slip)
+        chosen = select_mode(*args)
+        # every mode of the table, the first consistent one with no rival taken
+        every = jnp.arange(len(table))
+        modes, margins, still, paradox = jax.vmap(
+            lambda i: _candidate(
+                0.0, state, geom, table.mode(i, old), scene, model, TOL, resting, zero_slip, True
+            )
+        )(every)
+        admissible = jnp.all(~jnp.asarray(table.active) | resting, axis=1) & still
+        admissible = admissible & ~exclusions(table, every, model, old, trigger)
+        violation = jnp.max(jnp.maximum(-margins, 0.0), axis=1)
+        ok = admissible & (violation <= TOL.force)
+        plain = ok & ~paradox
+        first = jnp.where(jnp.any(plain), jnp.argmax(plain), jnp.argmax(ok))
+        i = jnp.where(jnp.any(ok), first, jnp.argmin(jnp.where(admissible, violation, jnp.inf)))
+        reference = jax.tree.map(lambda x: x[i], modes)
+        return chosen.mode, chosen.consistent, reference, jnp.any(ok), jnp.sum(resting)
+
+    return jax.vmap(one)(states, friction)
+
+
+def test_mode_choice_equals_testing_every_mode():
+    """The mode chosen at an event from the candidates of the resting points, tested a chunk
+    at a time until one holds a consistent mode, is the one that testing every mode of the
+    table would choose (the first consistent one in the table's order), with its sliding
+    directions, for a box and a d12 resting on a face, an edge or a corner, sliding,
+    spinning, rocking or still (48 states each, friction 0.1-1)."""
+    key = jax.random.key(11)
+    for which in range(len(CHOICE_SHAPES)):
+        key, k1, k2 = jax.random.split(key, 3)
+        friction = jax.random.uniform(k2, (48,), minval=0.1, maxval=1.0)
+        states = _resting_states(contact_model(CHOICE_SHAPES[which]), k1, 48)
+        chosen, consistent, reference, reference_ok, resting = _choices(which, states, friction)
+        # every kind of support was tested (corners, edges, faces of 4 or 5 points)
+        assert {1, 2}.issubset(set(np.asarray(resting).tolist()))
+        assert int(np.max(resting)) >= 4
+        np.testing.assert_array_equal(np.asarray(consistent), np.asarray(reference_ok))
+        for a, b in zip(jax.tree.leaves(chosen), jax.tree.leaves(reference), strict=True):
+            np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+        # and most states have a consistent mode of contact
+        assert np.mean(np.asarray(chosen.kind) != 0) > 0.5

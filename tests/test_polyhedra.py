@@ -1,6 +1,7 @@
 """Convex polyhedra and the regular dice: the hull, mass properties against published closed
 forms and a Monte Carlo estimate, face numbers and outcomes, shape offsets, and polyhedral
-dice thrown onto the floor with the contact engine."""
+dice thrown onto the floor with the contact engine, and the candidate modes the contact engine
+tests for the points a body rests on."""
 
 import jax
 import jax.numpy as jnp
@@ -11,7 +12,7 @@ from programs import persistent
 import jaxrb
 from jaxrb import dice
 from jaxrb.contact._features import contact_model
-from jaxrb.contact._modes import CandidateTable
+from jaxrb.contact._modes import FLIGHT, CandidateTable
 
 PHI = (1 + 5**0.5) / 2
 # published moments of inertia about the centroid (isotropic), per unit mass and edge a = 1,
@@ -173,6 +174,42 @@ def test_polyhedron_face_support_regions():
     assert table.groups.shape[0] == model.num_faces
     if len(sizes) > 1:  # faces of several sizes: smaller groups end in repeated FLIGHT
         assert np.all(table.kind[table.groups[:, -1]] == 0)
+
+
+def test_candidate_lists_hold_every_mode_that_can_apply():
+    """The modes `CandidateTable.candidates` has tested for a set of resting points (the
+    chunks it names) include every mode that holds no other point, for every set of one or
+    two points and every face's points, of a box, a coin, a ball, the regular dice and a
+    random hull; the lists are whole chunks, FLIGHT after the tested ones. With no point
+    resting nothing is tested (FLIGHT, the one mode that applies, is taken untested)."""
+    rng = np.random.default_rng(5)
+    shapes = [
+        jaxrb.Box((0.008, 0.006, 0.004)),
+        jaxrb.Cylinder(0.012, 0.001),
+        jaxrb.Sphere(0.01),
+        *(dice.BUILDERS[sides]().shape for sides in (4, 8, 12, 20)),
+        jaxrb.ConvexPolyhedron(rng.normal(size=(30, 3))),
+    ]
+    for shape in shapes:
+        model = contact_model(shape)
+        table = CandidateTable(model)
+        P = model.num_points
+        sets = [np.isin(np.arange(P), (p, q)) for p in range(P) for q in range(p, P)]
+        sets += [np.isin(np.arange(P), pts) for pts in model.face_points]
+        sets.append(np.zeros(P, bool))
+        indices, chunks = jax.vmap(table.candidates)(jnp.asarray(np.stack(sets)))
+        assert indices.shape[1] % table.chunk == 0
+        for resting, listed, n in zip(sets, np.asarray(indices), np.asarray(chunks), strict=True):
+            tested, untested = listed[: n * table.chunk], listed[n * table.chunk :]
+            applies = np.flatnonzero(np.all(~table.active | resting, axis=1))
+            if not resting.any():
+                assert n == 0 and list(applies) == [len(table) - 1]
+                continue
+            assert set(applies) <= set(tested), (type(shape).__name__, np.flatnonzero(resting))
+            assert np.all(table.kind[untested] == FLIGHT)
+        # fewer modes than a face's group when one or two points rest
+        if model.num_faces and len(table.groups) > 1:
+            assert int(np.max(table.near_chunks)) < int(np.min(table.group_chunks))
 
 
 THROWS = 3

@@ -89,11 +89,12 @@ class CandidateTable:
     before slide), as static numpy arrays (C,): kind, a, b, face, stick (C, 2), and the masks
     (C, P) of the points each one holds on the floor (`active`) and holds still (`sticking`).
 
-    `candidates`: the indices of the modes that can apply when the body touches the floor
+    `candidates`: the indices of the modes that can apply when the body rests on the floor
     with some of its points. All touching points of a convex body lie in one supporting
     plane, i.e. on one face (or on an edge or corner of it), so for a body with faces whose
-    points are all corners (a box) only that face's modes need testing: `group(touching)`
-    gives those indices; otherwise every mode is a candidate.
+    points are all corners (a box) only that face's modes need testing (its `groups` row);
+    otherwise every mode is a candidate. When at most two points rest, only the modes that
+    hold no other point can apply (`near`: a handful, against a face's two or three dozen).
     """
 
     def __init__(self, model):
@@ -130,25 +131,54 @@ class CandidateTable:
         on_a_face = [np.any(np.all(~a | faces, axis=1)) for a in self.active]
         if model.num_faces and all(on_a_face):
             # per face: the modes whose points all lie on it (FLIGHT among them)
-            # faces with fewer corners than the largest repeat FLIGHT (the last mode)
             groups = [np.flatnonzero(np.all(~self.active | f, axis=1)) for f in faces]
-            size = max(len(g) for g in groups)
-            self.groups = np.stack([np.pad(g, (0, size - len(g)), mode="edge") for g in groups])
             self.group_faces = faces
         else:
-            self.groups = np.arange(len(rows))[None, :]
+            groups = [np.arange(len(rows))]
             self.group_faces = np.ones((1, P), bool)
+        # near[p, q]: the modes that hold no point but p and q (p == q: one point), in the
+        # table's order. Every list of candidates is tested `chunk` modes at a time, as
+        # many as one point at rest has (stick, slide, flight): fewer chunks of more modes
+        # test more modes that do not apply, more of fewer modes cost more passes (measured:
+        # docs/contact.md, section 3)
+        near = [
+            [np.flatnonzero(np.all(~self.active | mask((p, q)), axis=1)) for q in range(P)]
+            for p in range(P)
+        ]
+        size = max(len(g) for g in groups)
+        self.chunk = min(max(len(near[p][p]) for p in range(P)), size)
+        # every list padded with FLIGHT (the last mode) to the whole chunks of the longest
+        whole = lambda n: -(-n // self.chunk)  # noqa: E731
+        length = whole(max(size, *(len(g) for row in near for g in row))) * self.chunk
+
+        def pad(g):
+            return np.pad(g, (0, length - len(g)), constant_values=len(rows) - 1)
+
+        self.near = np.stack([np.stack([pad(g) for g in row]) for row in near])
+        self.near_chunks = np.array([[whole(len(g)) for g in row] for row in near], np.int32)
+        self.groups = np.stack([pad(g) for g in groups])
+        self.group_chunks = np.array([whole(len(g)) for g in groups], np.int32)
 
     def __len__(self):
         return len(self.kind)
 
-    def candidates(self, touching) -> jax.Array:
-        """Indices (traced, fixed length) of the modes to test when the points `touching`
-        (P,) touch the floor: the group of the face holding most of them."""
-        if len(self.groups) == 1:
-            return jnp.asarray(self.groups[0])
-        count = jnp.sum(jnp.asarray(self.group_faces) & touching, axis=1)
-        return jnp.asarray(self.groups)[jnp.argmax(count)]
+    def candidates(self, resting) -> tuple[jax.Array, jax.Array]:
+        """The modes to test when the points `resting` (P,) rest on the floor: their indices
+        (traced, of a fixed length, a whole number of `chunk`s, in the table's order) and
+        how many chunks of them to test (the others repeat FLIGHT). No point resting: none
+        (FLIGHT is the only mode that applies); one or two: the modes that hold no other
+        point; more: the group of the face holding most of them."""
+        count = jnp.sum(jnp.asarray(self.group_faces) & resting, axis=1)
+        g = jnp.argmax(count)
+        group, chunks = jnp.asarray(self.groups)[g], jnp.asarray(self.group_chunks)[g]
+        P = resting.shape[0]
+        first = jnp.argmax(resting)
+        last = jnp.where(jnp.any(resting), P - 1 - jnp.argmax(resting[::-1]), first)
+        near = jnp.asarray(self.near)[first, last]
+        near_chunks = jnp.asarray(self.near_chunks)[first, last]
+        few = jnp.sum(resting) <= 2
+        chunks = jnp.where(few, near_chunks, chunks)
+        return jnp.where(few, near, group), jnp.where(jnp.any(resting), chunks, 0)
 
     def mode(self, i, like: Mode) -> Mode:
         """Candidate `i` (a traced index) as a `Mode`, its seed directions taken from `like`."""

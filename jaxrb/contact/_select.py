@@ -2,8 +2,9 @@
 features, each solved and tested against the complementarity conditions (docs/contact.md,
 section 3).
 
-All candidates are evaluated at once (vmap over the shape's candidate table) and the first
-consistent one in the table's order is taken: branch-free, so it jits and vmaps.
+The candidates (`CandidateTable.candidates`: those of the resting points) are evaluated a
+chunk at a time (vmap within a chunk, a scan over the chunks that hold candidates) and the
+first consistent one in the table's order is taken: it jits and vmaps.
 """
 
 import equinox as eqx
@@ -399,31 +400,69 @@ def select_mode(
     """The next mode at an event (state after any impact). `resting`: (P,) points touching
     with zero normal velocity; `zero_slip`: (P,) points whose slip is below slip_stop;
     `live`: whether the choice is used (False: a finished member of a batch)."""
-    candidates = table.candidates(resting)
+    candidates, chunks = table.candidates(resting)
+    size = table.chunk
 
+    @eqx.filter_jit  # traced once, for its shapes and for its chunks
     def one(i):
         mode = table.mode(i, old)
         return _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live)
 
-    modes, margins, still, paradox = jax.vmap(one)(candidates)
     t_active = jnp.asarray(table.active)[candidates]
-    admissible = jnp.all(~t_active | resting, axis=1) & still
+    admissible = jnp.all(~t_active | resting, axis=1)
     admissible = admissible & ~exclusions(table, candidates, model, old, trigger)
-    violation = jnp.max(jnp.maximum(-margins, 0.0), axis=1)
-    ok = admissible & (violation <= tol.force)
+
+    # a chunk of candidates at a time (under vmap side by side), in the table's order, until
+    # one holds a consistent candidate with no rival (the Painlevé paradox's, below): the
+    # first such one is taken, and no later one can come before it
+    untested = jax.tree.map(
+        lambda x: jnp.zeros(x.shape, x.dtype), jax.eval_shape(jax.vmap(one), candidates[:size])
+    )
+
+    def verdict(admissible, margins, still, paradox):
+        admissible = admissible & still
+        violation = jnp.max(jnp.maximum(-margins, 0.0), axis=1)
+        ok = admissible & (violation <= tol.force)
+        return admissible, violation, ok, ok & ~paradox
+
+    def test_chunk(settled, chunk):
+        k, indices, allowed = chunk
+        needed = (k < chunks) & ~settled
+        out = only_where_needed(needed, lambda: jax.vmap(one)(indices), lambda: untested)
+        plain = verdict(allowed, *out[1:])[3]
+        return settled | (needed & jnp.any(plain)), (out, needed)
+
+    chunk_ids = jnp.arange(candidates.shape[0] // size, dtype=chunks.dtype)
+    split = lambda x: x.reshape((-1, size) + x.shape[1:])  # noqa: E731
+    _, (tested, was_tested) = jax.lax.scan(
+        test_chunk, jnp.array(False), (chunk_ids, split(candidates), split(admissible))
+    )
+    modes, margins, still, paradox = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), tested)
+    admissible = admissible & jnp.repeat(was_tested, size)
+    admissible, violation, ok, plain = verdict(admissible, margins, still, paradox)
     any_ok = jnp.any(ok)
     # the Painlevé paradox: with no consistent mode, a sliding contact on a normal problem
     # that is not a P-matrix has no solution; a consistent mode of that kind has a rival (the
     # contact lifting off), and the mode without it is taken
     paradox = admissible & paradox
     painleve = ~any_ok & jnp.any(paradox)
-    plain = ok & ~paradox
     ambiguous = any_ok & jnp.any(ok & paradox) & jnp.any(plain)
-    first = jnp.where(jnp.any(plain), jnp.argmax(plain), jnp.argmax(ok))
-    i = jnp.where(any_ok, first, jnp.argmin(jnp.where(admissible, violation, jnp.inf)))
+    # the first in the table's order of preference
+    first_of = lambda mask: jnp.argmin(jnp.where(mask, candidates, len(table)))  # noqa: E731
+    first = jnp.where(jnp.any(plain), first_of(plain), first_of(ok))
+    least = jnp.min(jnp.where(admissible, violation, jnp.inf))
+    i = jnp.where(any_ok, first, first_of(admissible & (violation == least)))
+    # no point rests: nothing was tested, and the body flies (`_candidate`'s FLIGHT)
+    dtype = state.pos.dtype
+    flight = eqx.tree_at(
+        lambda m: (m.slide_dir, m.twist_dir, m.from_rest),
+        table.mode(len(table) - 1, old),
+        (jnp.zeros((2, 3), dtype), jnp.zeros(3, dtype), jnp.zeros(2, bool)),
+    )
+    flies = chunks == 0
     return Choice(
-        mode=tree_index(modes, i),
-        consistent=any_ok,
+        mode=tree_where(flies, flight, tree_index(modes, i)),
+        consistent=any_ok | flies,
         painleve=painleve,
         ambiguous=ambiguous,
     )
