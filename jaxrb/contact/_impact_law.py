@@ -19,10 +19,10 @@ problem is solved by projected Gauss-Seidel (until a sweep changes no impulse by
 tangent plane, so that at the fixed point a sliding impulse opposes the slip exactly), then
 *polished*: the pattern it identifies (which points push, which stick, the sliding
 directions) is solved exactly (a minimum-norm solve of its equalities, as the four corners of
-a face are redundant) and kept if it satisfies every condition. Where the pattern is not
-unique (a face sliding on four corners: the normal impulses split in many ways) the polish
-may fail and the Gauss-Seidel solution, which satisfies the conditions to its convergence,
-is kept.
+a face are redundant) and kept if it satisfies every condition (the polishes after one that
+is exact to roundoff are not tried). Where the pattern is not unique (a face sliding on four
+corners: the normal impulses split in many ways) the polish may fail and the Gauss-Seidel
+solution, which satisfies the conditions to its convergence, is kept.
 
 Four variants (`solve_variant` solves one, `solve_impacts` all four; the event map solves
 each only where it uses it): Newton-Coulomb; the frictionless impulse, used where the
@@ -171,20 +171,30 @@ def _polish(W, c, target, present, mu, bilateral, lam, margin):
     speed = jnp.max(jnp.abs(c)) + tiny
 
     def attempt(i, carry):  # first the directions friction says, then the slip after the best
-        best, best_error, hats = carry
-        v = c + jnp.einsum("iajb,jb->ia", W, best)
-        vt = _safe_norm(v[:, 1:])
-        slips = (i > 0) & (vt > 1e-6 * speed)  # a slip of roundoff size tells no direction
-        hats = jnp.where(slips[:, None], v[:, 1:] / jnp.where(slips, vt, 1.0)[:, None], hats)
-        trial = solve(hats)
-        error = _violation(W, c, target, present, mu, bilateral, trial)
-        better = error < best_error
-        return jnp.where(better, trial, best), jnp.where(better, error, best_error), hats
+        def refine(carry):
+            best, best_error, hats = carry
+            v = c + jnp.einsum("iajb,jb->ia", W, best)
+            vt = _safe_norm(v[:, 1:])
+            slips = (i > 0) & (vt > 1e-6 * speed)  # a slip of roundoff size tells no direction
+            hats = jnp.where(slips[:, None], v[:, 1:] / jnp.where(slips, vt, 1.0)[:, None], hats)
+            trial = solve(hats)
+            error = _violation(W, c, target, present, mu, bilateral, trial)
+            better = error < best_error
+            return jnp.where(better, trial, best), jnp.where(better, error, best_error), hats
+
+        # a solution exact to roundoff is not refined
+        return jax.lax.cond(carry[1] <= _exact(c), lambda carry: carry, refine, carry)
 
     # a loop, so that the solve is traced (and compiled) once
     start = (jnp.zeros_like(lam), jnp.array(jnp.inf, dtype), hats0)
     best, _, _ = jax.lax.fori_loop(0, 1 + POLISH_ITERATIONS, attempt, start)
     return best
+
+
+def _exact(c):
+    """A violation of the conditions (m/s) that small is roundoff: `SETTLED` machine
+    epsilons of the largest contact speed `c`."""
+    return SETTLED * jnp.finfo(c.dtype).eps * (jnp.max(jnp.abs(c)) + jnp.finfo(c.dtype).tiny)
 
 
 def _violation(W, c, target, present, mu, bilateral, lam):
@@ -294,16 +304,26 @@ def solve_variant(problem: ImpactProblem, e, mu, bilateral, tol) -> ImpactOutcom
     target = jnp.where(present, -e * jnp.minimum(c[:, 0], 0.0), 0.0)
     # derivatives flow through the polish's exact solve, not through the sweeps
     lam = _gauss_seidel(W, c, target, present, mu, bilateral, jnp.zeros_like(c), SWEEPS)
-    # polished three ways: a slot that Gauss-Seidel leaves near its cone's edge may stick
-    # (on the edge) or slide; the best (or Gauss-Seidel's own solution) is kept (a loop over
-    # the margins, not `jax.vmap`: the same program, but traced without batching every
-    # operation of the polish's unrolled solve)
+    # polished up to three ways: a slot that Gauss-Seidel leaves near its cone's edge may
+    # stick (on the edge) or slide; the best (or Gauss-Seidel's own solution) is kept, and
+    # once a polish is exact to roundoff the others are not tried (a loop over the margins,
+    # not `jax.vmap`: the same program, but traced without batching every operation of the
+    # polish's unrolled solve)
+    violation = lambda x: _violation(W, c, target, present, mu, bilateral, x)  # noqa: E731
+
+    def polish(exact, margin):
+        def tried():
+            polished = _polish(W, c, target, present, mu, bilateral, lam, margin)
+            return polished, violation(polished)
+
+        untried = lambda: (jnp.zeros_like(lam), jnp.array(jnp.inf, dtype))  # noqa: E731
+        polished, error = jax.lax.cond(exact, untried, tried)
+        return exact | (error <= _exact(c)), (polished, error)
+
     margins = jnp.array(POLISH_MARGINS, dtype)
-    polished = jax.lax.map(
-        lambda margin: _polish(W, c, target, present, mu, bilateral, lam, margin), margins
-    )
+    _, (polished, errors) = jax.lax.scan(polish, jnp.array(False), margins)
     tries = jnp.concatenate([lam[None], polished])
-    errors = jax.vmap(lambda x: _violation(W, c, target, present, mu, bilateral, x))(tries)
+    errors = jnp.concatenate([violation(lam)[None], errors])
     # prefer an exact (polished) solution on ties: derivatives flow through it only
     best = jnp.argmin(errors.at[0].set(2.0 * errors[0] + tol.velocity))
     lam = tries[best]
