@@ -126,11 +126,12 @@ POLISH_ITERATIONS = 3
 POLISH_MARGINS = (1e-9, 1e-2, -1e-2)  # relative distance inside the cone that counts as sticking
 
 
-def _polish(W, c, target, present, mu, bilateral, lam, margin):
+def _polish(W, c, target, present, mu, bilateral, lam, margin, exact):
     """The exact solution of the pattern of `lam`: which slots push (Lambda_n > 0, or all
     present ones when bilateral), which stick (inside the cone by more than the relative
     `margin`), and along which directions the others slide (those opposing their friction;
-    then, while it helps, those of the slip after the polished impulse)."""
+    then, while it helps and the best violates the conditions by more than `exact`, those of
+    the slip after the polished impulse)."""
     S = c.shape[0]
     dtype = c.dtype
     tiny = jnp.finfo(dtype).tiny
@@ -183,7 +184,7 @@ def _polish(W, c, target, present, mu, bilateral, lam, margin):
             return jnp.where(better, trial, best), jnp.where(better, error, best_error), hats
 
         # a solution exact to roundoff is not refined
-        return jax.lax.cond(carry[1] <= _exact(c), lambda carry: carry, refine, carry)
+        return jax.lax.cond(carry[1] <= exact, lambda carry: carry, refine, carry)
 
     # a loop, so that the solve is traced (and compiled) once
     start = (jnp.zeros_like(lam), jnp.array(jnp.inf, dtype), hats0)
@@ -310,15 +311,16 @@ def solve_variant(problem: ImpactProblem, e, mu, bilateral, tol) -> ImpactOutcom
     # not `jax.vmap`: the same program, but traced without batching every operation of the
     # polish's unrolled solve)
     violation = lambda x: _violation(W, c, target, present, mu, bilateral, x)  # noqa: E731
+    exact = _exact(c)
 
-    def polish(exact, margin):
+    def polish(done, margin):
         def tried():
-            polished = _polish(W, c, target, present, mu, bilateral, lam, margin)
+            polished = _polish(W, c, target, present, mu, bilateral, lam, margin, exact)
             return polished, violation(polished)
 
         untried = lambda: (jnp.zeros_like(lam), jnp.array(jnp.inf, dtype))  # noqa: E731
-        polished, error = jax.lax.cond(exact, untried, tried)
-        return exact | (error <= _exact(c)), (polished, error)
+        polished, error = jax.lax.cond(done, untried, tried)
+        return done | (error <= exact), (polished, error)
 
     margins = jnp.array(POLISH_MARGINS, dtype)
     _, (polished, errors) = jax.lax.scan(polish, jnp.array(False), margins)

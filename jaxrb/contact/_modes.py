@@ -172,8 +172,7 @@ class CandidateTable:
         g = jnp.argmax(count)
         group, chunks = jnp.asarray(self.groups)[g], jnp.asarray(self.group_chunks)[g]
         P = resting.shape[0]
-        first = jnp.argmax(resting)
-        last = jnp.where(jnp.any(resting), P - 1 - jnp.argmax(resting[::-1]), first)
+        first, last = jnp.argmax(resting), P - 1 - jnp.argmax(resting[::-1])
         near = jnp.asarray(self.near)[first, last]
         near_chunks = jnp.asarray(self.near_chunks)[first, last]
         few = jnp.sum(resting) <= 2
@@ -552,6 +551,12 @@ def tree_where(test, a, b):
 def tree_index(tree, i):
     """Entry `i` of every leaf's leading axis."""
     return jax.tree.map(lambda x: x[i], tree)
+
+
+def tree_zeros(tree):
+    """Zeros of the shape and dtype of every leaf of `tree` (arrays or `jax.eval_shape`'s
+    shapes): the result of work skipped by `only_where_needed`."""
+    return jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), tree)
 
 
 def sliding_hats(geom: Geometry, twist, mode: Mode, blend):

@@ -30,6 +30,7 @@ from ._modes import (
     solve_mode,
     tree_index,
     tree_where,
+    tree_zeros,
     unit_or,
 )
 
@@ -415,9 +416,7 @@ def select_mode(
     # a chunk of candidates at a time (under vmap side by side), in the table's order, until
     # one holds a consistent candidate with no rival (the Painlevé paradox's, below): the
     # first such one is taken, and no later one can come before it
-    untested = jax.tree.map(
-        lambda x: jnp.zeros(x.shape, x.dtype), jax.eval_shape(jax.vmap(one), candidates[:size])
-    )
+    untested = tree_zeros(jax.eval_shape(jax.vmap(one), candidates[:size]))
 
     def verdict(admissible, margins, still, paradox):
         admissible = admissible & still

@@ -35,6 +35,7 @@ from ._modes import (
     solve_mode,
     tree_index,
     tree_where,
+    tree_zeros,
     unit_state,
 )
 from ._projection import project_positions, project_velocities
@@ -73,10 +74,6 @@ class EventOutcome(eqx.Module):
     ambiguous: jax.Array
     energy_rise: jax.Array
     penetration: jax.Array
-
-
-def _zeros_like(tree):
-    return jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), tree)
 
 
 def _put(stacked, one, k):
@@ -129,7 +126,7 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol, live=True) -> 
     # that adds energy too, then the plastic one; where the bounces that follow would merge,
     # their series' limit. Each solved only where it is used (a loop over the variants, so
     # that the impact law is traced once)
-    no_problem = lambda: _zeros_like(  # noqa: E731
+    no_problem = lambda: tree_zeros(  # noqa: E731
         jax.eval_shape(impact_problem, state, geom, points, hitting, scene, frames, mu)
     )
     problem = only_where_needed(
@@ -161,7 +158,7 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol, live=True) -> 
 
     restitution, friction, bilateral = variant_parameters(e, problem.mu)
     no_outcome = ImpactOutcome(
-        _zeros_like(state), jnp.zeros(3, dtype), jnp.zeros(3, dtype), jnp.array(False)
+        tree_zeros(state), jnp.zeros(3, dtype), jnp.zeros(3, dtype), jnp.array(False)
     )
 
     def solve(variants, k):
