@@ -53,11 +53,14 @@ def test_ball_impact_times_apex_and_rest():
     # at rest on the floor at the end, nothing moves
     np.testing.assert_allclose(np.asarray(traj.states.pos[-1]), [0, 0, R_BALL], atol=1e-12)
     np.testing.assert_allclose(np.asarray(traj.states.vel[-1]), 0.0, atol=1e-12)
-    # energy lost at each impact: (1 - e^2) of the incoming kinetic energy
+    # energy lost at each impact: (1 - e^2) of the incoming kinetic energy, to roundoff: the
+    # loss is the difference of two total energies of up to E0 = m g (h0 + R), so a late
+    # bounce's (1e-5 of E0 at the 17th) has a floor of a few eps E0 besides its relative 1e-12
     un = np.asarray(rec.normal_speed[:count])
     lost = np.asarray(rec.energy_lost[:count])
+    roundoff = 4 * np.finfo(np.float64).eps * G * (h0 + R_BALL)
     np.testing.assert_allclose(
-        lost[: count - 1], 0.5 * (1 - e**2) * un[: count - 1] ** 2, rtol=1e-12
+        lost[: count - 1], 0.5 * (1 - e**2) * un[: count - 1] ** 2, rtol=1e-12, atol=roundoff
     )
     assert np.all(lost >= 0)
     np.testing.assert_allclose(np.asarray(rec.impulse[:n, 2]), (1 + e) * un[:n], rtol=1e-12)

@@ -3,7 +3,7 @@ features, each solved and tested against the complementarity conditions (docs/co
 section 3).
 
 The candidates (`CandidateTable.candidates`: those of the resting points) are evaluated a
-chunk at a time (vmap within a chunk, a scan over the chunks that hold candidates) and the
+chunk at a time (vmap within a chunk, a while loop over the chunks that are tested) and the
 first consistent one in the table's order is taken: it jits and vmaps.
 """
 
@@ -415,27 +415,34 @@ def select_mode(
 
     # a chunk of candidates at a time (under vmap side by side), in the table's order, until
     # one holds a consistent candidate with no rival (the Painlevé paradox's, below): the
-    # first such one is taken, and no later one can come before it
-    untested = tree_zeros(jax.eval_shape(jax.vmap(one), candidates[:size]))
-
+    # first such one is taken, and no later one can come before it. A while loop: a chunk
+    # that is not needed costs nothing (under `jax.vmap` the loop runs while any member
+    # needs a chunk, and each member keeps its own results)
     def verdict(admissible, margins, still, paradox):
         admissible = admissible & still
         violation = jnp.max(jnp.maximum(-margins, 0.0), axis=1)
         ok = admissible & (violation <= tol.force)
         return admissible, violation, ok, ok & ~paradox
 
-    def test_chunk(settled, chunk):
-        k, indices, allowed = chunk
-        needed = (k < chunks) & ~settled
-        out = only_where_needed(needed, lambda: jax.vmap(one)(indices), lambda: untested)
-        plain = verdict(allowed, *out[1:])[3]
-        return settled | (needed & jnp.any(plain)), (out, needed)
-
-    chunk_ids = jnp.arange(candidates.shape[0] // size, dtype=chunks.dtype)
     split = lambda x: x.reshape((-1, size) + x.shape[1:])  # noqa: E731
-    _, (tested, was_tested) = jax.lax.scan(
-        test_chunk, jnp.array(False), (chunk_ids, split(candidates), split(admissible))
-    )
+    by_chunk, allowed_by_chunk = split(candidates), split(admissible)
+    shapes = jax.eval_shape(jax.vmap(one), candidates[:size])
+    stacked = lambda x: jax.ShapeDtypeStruct((len(by_chunk), *x.shape), x.dtype)  # noqa: E731
+    tested = tree_zeros(jax.tree.map(stacked, shapes))
+
+    def more(carry):
+        k, settled, _, _ = carry
+        return (k < chunks) & ~settled
+
+    def test_chunk(carry):
+        k, _, tested, was_tested = carry
+        out = jax.vmap(one)(by_chunk[k])
+        plain = verdict(allowed_by_chunk[k], *out[1:])[3]
+        tested = jax.tree.map(lambda all_, x: all_.at[k].set(x), tested, out)
+        return k + 1, jnp.any(plain), tested, was_tested.at[k].set(True)
+
+    start = (jnp.zeros((), chunks.dtype), jnp.array(False), tested, jnp.zeros(len(by_chunk), bool))
+    _, _, tested, was_tested = jax.lax.while_loop(more, test_chunk, start)
     modes, margins, still, paradox = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), tested)
     admissible = admissible & jnp.repeat(was_tested, size)
     admissible, violation, ok, plain = verdict(admissible, margins, still, paradox)
