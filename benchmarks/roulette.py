@@ -36,7 +36,9 @@ Run: python -m benchmarks.roulette --speeds 29 --draws 32 --out bench_out
 """
 
 import argparse
+import functools
 import time
+from typing import NamedTuple
 
 import jax
 
@@ -68,58 +70,99 @@ RTOL = ATOL = 1e-8
 PAIR, POINT = 2, 1
 
 
-def example():
-    """The shipped `roulette` scene and its true drag coefficient k (kg/m)."""
+class Example(NamedTuple):
+    """The shipped `roulette` scene and the numbers the study uses: the track's inclination
+    d (rad), the ball's radius (m), mass (kg) and centre's radius rho (m) in the corner, the
+    true drag coefficient k (kg/m), rolling resistance and launch speed (m/s)."""
+
+    spec: object
+    wheel: object
+    ball: object
+    d: float
+    r_ball: float
+    rho: float
+    mass: float
+    k: float
+    mu_r: float
+    v0: float
+
+
+@functools.cache
+def example() -> Example:
+    """The shipped `roulette` scene (`Example`), built when first asked for, not at import:
+    building it runs JAX, which would start its backend before `main` can choose the CPU
+    compiler settings."""
     spec = load_scene(example_path("roulette"))
     (drag,) = [f for f in spec.scene.forces if isinstance(f, jaxrb.QuadraticDrag)]
-    return spec, float(drag.coefficient)
+    wheel, ball = spec.scene.floor, spec.scene.body
+    r_ball = float(ball.shape.radius)
+    return Example(
+        spec=spec,
+        wheel=wheel,
+        ball=ball,
+        d=float(wheel.inclination),
+        r_ball=r_ball,
+        rho=float(wheel.wall_radius) - r_ball,
+        mass=float(ball.mass),
+        k=float(drag.coefficient),
+        mu_r=float(wheel.rolling_resistance),
+        v0=float(spec.state0.vel[1]),
+    )
 
 
-SPEC, K_TRUE = example()
-SCENE = SPEC.scene
-WHEEL, BALL = SCENE.floor, SCENE.body
-D, R_BALL = float(WHEEL.inclination), float(BALL.shape.radius)
-RHO = float(WHEEL.wall_radius) - R_BALL
-MU_R_TRUE, MASS = float(WHEEL.rolling_resistance), float(BALL.mass)
-V0_TRUE = float(SPEC.state0.vel[1])
+_NAMES = dict(D="d", R_BALL="r_ball", RHO="rho", MASS="mass", K_TRUE="k", MU_R_TRUE="mu_r")
+_NAMES.update(V0_TRUE="v0", WHEEL="wheel", BALL="ball", SPEC="spec")
+
+
+def __getattr__(name):
+    """The example's numbers under their names in the study (`roulette.V0_TRUE`, ...)."""
+    if name in _NAMES:
+        return getattr(example(), _NAMES[name])
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def scene_with(drag, rolling):
     """The example scene with drag coefficient `drag` (kg/m) and rolling resistance `rolling`."""
-    wheel = eqx.tree_at(lambda w: w.rolling_resistance, WHEEL, jnp.asarray(rolling))
+    ex = example()
+    wheel = eqx.tree_at(lambda w: w.rolling_resistance, ex.wheel, jnp.asarray(rolling))
     forces = (jaxrb.Gravity(), jaxrb.QuadraticDrag(drag))
-    return jaxrb.Scene(BALL, forces, floor=wheel)
+    return jaxrb.Scene(ex.ball, forces, floor=wheel)
 
 
 def launch(v0):
     """In the corner at azimuth 0, rolling along +y at `v0` (m/s), no spin about the normal."""
-    d = D
-    height = (R_BALL + RHO * np.sin(d)) / np.cos(d)
+    ex = example()
+    d = ex.d
+    height = (ex.r_ball + ex.rho * np.sin(d)) / np.cos(d)
     slope = jnp.array([np.cos(d), 0.0, np.sin(d)])
     return jaxrb.make_state(
-        pos=jnp.array([RHO, 0.0, height]),
+        pos=jnp.array([ex.rho, 0.0, height]),
         vel=jnp.stack([0.0 * v0, v0, 0.0 * v0]),
-        omega=-(v0 / R_BALL) * slope,
+        omega=-(v0 / ex.r_ball) * slope,
     )
 
 
-def closed_form(v0, drag=K_TRUE, rolling=MU_R_TRUE):
+def closed_form(v0, drag=None, rolling=None):
     """(t*, phi*, v*): when (s), at which unwrapped azimuth (rad) and speed (m/s) the ball
     launched at `v0` leaves the wall (module docstring)."""
-    A = 5 / 7 * rolling * G / np.cos(D)
-    B = 5 / 7 * (drag / MASS - 0.4 * rolling * np.sin(D) / RHO)
+    ex = example()
+    drag = ex.k if drag is None else drag
+    rolling = ex.mu_r if rolling is None else rolling
+    A = 5 / 7 * rolling * G / np.cos(ex.d)
+    B = 5 / 7 * (drag / ex.mass - 0.4 * rolling * np.sin(ex.d) / ex.rho)
     q, rate = np.sqrt(B / A), np.sqrt(A * B)
-    v_leave = np.sqrt(5 / 7 * G * RHO * np.tan(D))
+    v_leave = np.sqrt(5 / 7 * G * ex.rho * np.tan(ex.d))
     t = (np.arctan(q * v0) - np.arctan(q * v_leave)) / rate
-    phi = np.log((A + B * v0**2) / (A + B * v_leave**2)) / (2 * RHO * B)
+    phi = np.log((A + B * v0**2) / (A + B * v_leave**2)) / (2 * ex.rho * B)
     return t, phi, v_leave
 
 
 def rolling_limit(friction=None):
     """v_roll (m/s): the fastest launch the track's friction keeps rolling (docs/contact.md,
     section 11; the small friction along the track neglected)."""
-    mu = float(WHEEL.friction) if friction is None else friction
-    return np.sqrt(RHO * mu * G / (0.4 * np.cos(D) * (np.cos(D) + mu * np.sin(D))))
+    ex = example()
+    mu = float(ex.wheel.friction) if friction is None else friction
+    return np.sqrt(ex.rho * mu * G / (0.4 * np.cos(ex.d) * (np.cos(ex.d) + mu * np.sin(ex.d))))
 
 
 def unwrapped_azimuth(pos):
@@ -202,8 +245,9 @@ class TrackedAzimuth(eqx.Module):
 def tracked_data(track, noise, seed):
     """The true run's azimuth at 25 times over [0, track] s (every TRACKED-th save of
     `runs`), plus N(0, noise^2) (rad): (times, data, truth)."""
+    ex = example()
     one = lambda x: jnp.asarray([x])  # noqa: E731
-    _, phi, _ = runs(one(V0_TRUE), one(K_TRUE), one(MU_R_TRUE), one(track))
+    _, phi, _ = runs(one(ex.v0), one(ex.k), one(ex.mu_r), one(track))
     ts = np.linspace(0.0, track, SAVES)[::TRACKED]
     truth = np.asarray(phi)[0, ::TRACKED]
     rng = np.random.default_rng(seed)
@@ -213,9 +257,10 @@ def tracked_data(track, noise, seed):
 def identify(track=6.0, noise=0.005, seed=0, start=(2.0, 0.5)):
     """Fit k and mu_r to tracked azimuths; `start`: the initial guess as multiples of the
     true values. Returns (FitResult, ts, data, truth)."""
+    ex = example()
     ts, data, truth = tracked_data(track, noise, seed)
-    residuals = TrackedAzimuth(jnp.asarray(ts), jnp.asarray(data), jnp.asarray(V0_TRUE))
-    z0 = jnp.log(jnp.array([start[0] * K_TRUE, start[1] * MU_R_TRUE]))
+    residuals = TrackedAzimuth(jnp.asarray(ts), jnp.asarray(data), jnp.asarray(ex.v0))
+    z0 = jnp.log(jnp.array([start[0] * ex.k, start[1] * ex.mu_r]))
     fit = least_squares_fit(
         residuals,
         z0,
@@ -230,11 +275,12 @@ def identify(track=6.0, noise=0.005, seed=0, start=(2.0, 0.5)):
 
 def predict(fit, draws, seed=1):
     """Leaving time and azimuth of `draws` parameter sets from the fit's covariance (N,) each."""
+    ex = example()
     mean = np.array([float(fit.values["drag"]), float(fit.values["rolling_resistance"])])
     rng = np.random.default_rng(seed)
     params = rng.multivariate_normal(mean, fit.covariance, size=draws)
     params = np.abs(params)  # a draw below zero (far in the tail) is reflected
-    v0 = jnp.full(draws, V0_TRUE)
+    v0 = jnp.full(draws, ex.v0)
     t, phi = leaving(v0, jnp.asarray(params[:, 0]), jnp.asarray(params[:, 1]))
     return params, t, phi
 
@@ -242,9 +288,10 @@ def predict(fit, draws, seed=1):
 def sweep(speeds):
     """Leaving time and azimuth for each launch speed (N,), simulated and closed form (the
     closed form of a ball that rolls all along: valid up to `rolling_limit()`)."""
+    ex = example()
     n = len(speeds)
     v0 = jnp.asarray(speeds)
-    t, phi = leaving(v0, jnp.full(n, K_TRUE), jnp.full(n, MU_R_TRUE))
+    t, phi = leaving(v0, jnp.full(n, ex.k), jnp.full(n, ex.mu_r))
     t_cf, phi_cf, _ = closed_form(np.asarray(speeds))
     return t, phi, t_cf, phi_cf
 
@@ -284,6 +331,7 @@ def plot(speeds, t, phi, t_cf, phi_cf, fit_parts, path):
 
 
 def report(speeds, t, phi, t_cf, phi_cf, fit_parts, seconds, device):
+    ex = example()
     fit, ts, data, truth, params, t_pred, phi_pred, t_true, phi_true = fit_parts
     k, mu = fit.values["drag"], fit.values["rolling_resistance"]
     sk, smu = fit.std["drag"], fit.std["rolling_resistance"]
@@ -295,8 +343,8 @@ def report(speeds, t, phi, t_cf, phi_cf, fit_parts, seconds, device):
         f"Roulette study on {device}: {len(speeds)} launch speeds, {len(params)} prediction draws, {seconds:.0f} s in all (compilation included).",
         "",
         f"- Sweep: for the {int(rolls.sum())} launches below v_roll = {rolling_limit():.3f} m/s (the ball rolls all along) the lift-off time agrees with the closed form to {err_t:.1e} (relative, largest), the azimuth there to {err_phi:.1e} rad; the faster launches slide first and leave {np.nanmin(sooner):.2f} to {np.nanmax(sooner):.2f} s sooner than they would have rolling; {int(np.sum(np.isnan(t)))} runs did not leave the wall.",
-        f"- Fit from {ts.size} azimuths over {ts[-1]:g} s (noise {np.std(data - truth):.2g} rad): k = {float(k):.4g} +- {float(sk):.2g} kg/m (true {K_TRUE:.4g}), mu_r = {float(mu):.4g} +- {float(smu):.2g} (true {MU_R_TRUE:.4g}); {fit.num_steps} steps, converged: {fit.converged}.",
-        f"- Prediction (true launch speed {V0_TRUE:g} m/s): leaves at {np.nanmean(t_pred):.3f} +- {np.nanstd(t_pred):.3f} s (true {t_true:.3f} s), at azimuth {np.degrees(np.nanmean(phi_pred)):.1f} +- {np.degrees(np.nanstd(phi_pred)):.1f} deg (true {np.degrees(phi_true):.1f} deg, {phi_true / (2 * np.pi):.1f} turns).",
+        f"- Fit from {ts.size} azimuths over {ts[-1]:g} s (noise {np.std(data - truth):.2g} rad): k = {float(k):.4g} +- {float(sk):.2g} kg/m (true {ex.k:.4g}), mu_r = {float(mu):.4g} +- {float(smu):.2g} (true {ex.mu_r:.4g}); {fit.num_steps} steps, converged: {fit.converged}.",
+        f"- Prediction (true launch speed {ex.v0:g} m/s): leaves at {np.nanmean(t_pred):.3f} +- {np.nanstd(t_pred):.3f} s (true {t_true:.3f} s), at azimuth {np.degrees(np.nanmean(phi_pred)):.1f} +- {np.degrees(np.nanstd(phi_pred)):.1f} deg (true {np.degrees(phi_true):.1f} deg, {phi_true / (2 * np.pi):.1f} turns).",
         "",
         "| launch speed (m/s) | t* jaxrb (s) | t* closed form (s) | phi* jaxrb (rad) | phi* closed form (rad) |",
         "|---|---|---|---|---|",
@@ -307,12 +355,13 @@ def report(speeds, t, phi, t_cf, phi_cf, fit_parts, seconds, device):
 
 
 def study(n_speeds, draws, track=6.0, noise=0.005):
+    ex = example()
     speeds = np.linspace(1.2, 4.0, n_speeds)
     t, phi, t_cf, phi_cf = sweep(speeds)
     fit, ts, data, truth = identify(track, noise)
     params, t_pred, phi_pred = predict(fit, draws)
     (t_true,), (phi_true,) = leaving(
-        jnp.asarray([V0_TRUE]), jnp.asarray([K_TRUE]), jnp.asarray([MU_R_TRUE])
+        jnp.asarray([ex.v0]), jnp.asarray([ex.k]), jnp.asarray([ex.mu_r])
     )
     fit_parts = (fit, ts, data, truth, params, t_pred, phi_pred, t_true, phi_true)
     return speeds, t, phi, t_cf, phi_cf, fit_parts
@@ -327,6 +376,7 @@ def main(argv=None):
     p.add_argument("--out", default="bench_out")
     p.add_argument("--force", action="store_true", help="replace existing result files")
     a = p.parse_args(argv)
+    jaxrb.speed_up_compilation(cache=False)
     names = ("roulette.md", "roulette.png", "roulette.npz")
     md, png, npz = C.output_paths(p, a.out, names, a.force)
     start = time.perf_counter()

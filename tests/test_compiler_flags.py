@@ -131,3 +131,26 @@ def test_loop_pass_left_on_where_jax_platforms_names_an_accelerator():
         "import os, jaxrb; jaxrb.speed_up_compilation(cache=False); print(os.environ['XLA_FLAGS'])"
     )
     assert _python(code, "cuda").split() == [CPU_FLAG]
+
+
+def test_importing_jaxrb_starts_no_backend():
+    """`speed_up_compilation` can set the compiler only before JAX starts its backend, so no
+    module of the package (nor the studies a script imports before its `main`) may compute
+    anything with JAX at import."""
+    code = """
+import importlib, pkgutil, sys
+sys.path.insert(0, ".")
+import jaxrb
+from jax._src import xla_bridge
+names = [m.name for m in pkgutil.walk_packages(jaxrb.__path__, "jaxrb.")]
+names += ["benchmarks.roulette", "benchmarks.contact_throws", "benchmarks.b4_die_impacts"]
+started = []
+for name in names:
+    importlib.import_module(name)
+    if xla_bridge._backends and not started:
+        started.append(name)
+print(len(names), started[0] if started else "none")
+"""
+    count, first = _python(code, "cpu").split()
+    assert int(count) > 40
+    assert first == "none", f"importing {first} started JAX's backend"

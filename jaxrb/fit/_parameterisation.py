@@ -15,11 +15,13 @@
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._quaternion import quat_multiply
 
-_TRIL_ROWS = jnp.array([1, 2, 2])
-_TRIL_COLS = jnp.array([0, 0, 1])
+# numpy, not jax, arrays: importing the package must not start JAX's backend
+_TRIL_ROWS = np.array([1, 2, 2])
+_TRIL_COLS = np.array([0, 0, 1])
 
 
 def positive_to_unconstrained(x):
