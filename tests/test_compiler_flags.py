@@ -5,6 +5,7 @@ import os
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 from jaxrb._compilation import (
     CPU_FLAG,
@@ -139,7 +140,7 @@ def test_importing_jaxrb_starts_no_backend():
     anything with JAX at import."""
     code = """
 import importlib, pkgutil, sys
-sys.path.insert(0, ".")
+sys.path.insert(0, sys.argv[1])
 import jaxrb
 from jax._src import xla_bridge
 names = [m.name for m in pkgutil.walk_packages(jaxrb.__path__, "jaxrb.")]
@@ -151,6 +152,7 @@ for name in names:
         started.append(name)
 print(len(names), started[0] if started else "none")
 """
-    count, first = _python(code, "cpu").split()
+    root = str(Path(__file__).resolve().parents[1])  # the repository: the studies' package
+    count, first = _python(code, "cpu", root).split()
     assert int(count) > 40
     assert first == "none", f"importing {first} started JAX's backend"

@@ -54,7 +54,7 @@ def test_ball_impact_times_apex_and_rest():
     np.testing.assert_allclose(np.asarray(traj.states.pos[-1]), [0, 0, R_BALL], atol=1e-12)
     np.testing.assert_allclose(np.asarray(traj.states.vel[-1]), 0.0, atol=1e-12)
     # energy lost at each impact: (1 - e^2) of the incoming kinetic energy, to roundoff: the
-    # loss is the difference of two total energies of up to E0 = m g (h0 + R), so a late
+    # loss is the difference of two total energies of up to E0 = m g (h0 + R) (m = 1 kg), so a late
     # bounce's (1e-5 of E0 at the 17th) has a floor of a few eps E0 besides its relative 1e-12
     un = np.asarray(rec.normal_speed[:count])
     lost = np.asarray(rec.energy_lost[:count])

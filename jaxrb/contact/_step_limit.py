@@ -16,7 +16,8 @@ point with acceleration A can reach A h^2 / 8 = contact_tol / 4 at most. The gap
 shrinks to about a fifth per step until h_floor; a real touch is crossed in a step of about
 h_floor, so that the event is located on the dense output of a short step. Far from the
 floor the limit is inactive. (With k = 1/2 a die's corner took about ten steps down to the
-floor per bounce, with 0.8 about six, at the same accuracy of its impact times.)
+floor per bounce, with 0.8 about six, with the same errors at tolerances of 1e-8 and
+tighter.)
 
 A slide that stops is the same kind of dip: the slip's speed |s| falls to zero and, with
 friction turning round, rises again, and its condition (|s| - slip_stop / 2, section 4)
