@@ -110,17 +110,6 @@ def example() -> Example:
     )
 
 
-_NAMES = dict(D="d", R_BALL="r_ball", RHO="rho", MASS="mass", K_TRUE="k", MU_R_TRUE="mu_r")
-_NAMES.update(V0_TRUE="v0", WHEEL="wheel", BALL="ball", SPEC="spec")
-
-
-def __getattr__(name):
-    """The example's numbers under their names in the study (`roulette.V0_TRUE`, ...)."""
-    if name in _NAMES:
-        return getattr(example(), _NAMES[name])
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
 def scene_with(drag, rolling):
     """The example scene with drag coefficient `drag` (kg/m) and rolling resistance `rolling`."""
     ex = example()

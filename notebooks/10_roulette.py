@@ -63,11 +63,12 @@ import numpy as np
 
 from benchmarks import roulette
 
-t_cf, phi_cf, v_leave = roulette.closed_form(roulette.V0_TRUE)
-print(f"ball: r = {roulette.R_BALL * 1e3:g} mm, m = {roulette.MASS * 1e3:g} g; centre radius")
-print(f"rho = {roulette.RHO:g} m, track inclination {roulette.D:g} rad")
-print(f"drag k = {roulette.K_TRUE:.4g} kg/m, rolling resistance {roulette.MU_R_TRUE:g}")
-print(f"launched at {roulette.V0_TRUE:g} m/s it leaves the wall at v* = {v_leave:.4f} m/s,")
+ex = roulette.example()  # the shipped scene and its numbers
+t_cf, phi_cf, v_leave = roulette.closed_form(ex.v0)
+print(f"ball: r = {ex.r_ball * 1e3:g} mm, m = {ex.mass * 1e3:g} g; centre radius")
+print(f"rho = {ex.rho:g} m, track inclination {ex.d:g} rad")
+print(f"drag k = {ex.k:.4g} kg/m, rolling resistance {ex.mu_r:g}")
+print(f"launched at {ex.v0:g} m/s it leaves the wall at v* = {v_leave:.4f} m/s,")
 print(f"after t* = {t_cf:.4f} s and {phi_cf / (2 * np.pi):.2f} turns (closed form)")
 print(
     f"the track's friction keeps it rolling for launches up to {roulette.rolling_limit():.3f} m/s"
@@ -117,7 +118,7 @@ start = time.perf_counter()
 fit, ts, data, truth = roulette.identify(track=4.0, noise=0.005)
 print(f"fit in {time.perf_counter() - start:.0f} s (compilation included)")
 print(fit.report())
-print(f"true values: drag {roulette.K_TRUE:.5g}, rolling_resistance {roulette.MU_R_TRUE:g}")
+print(f"true values: drag {ex.k:.5g}, rolling_resistance {ex.mu_r:g}")
 
 # %% [markdown]
 # ## Predict where it leaves
@@ -129,9 +130,7 @@ print(f"true values: drag {roulette.K_TRUE:.5g}, rolling_resistance {roulette.MU
 # %%
 start = time.perf_counter()
 params, t_pred, phi_pred = roulette.predict(fit, 3)
-(t_true,), (phi_true,) = roulette.leaving(
-    np.array([roulette.V0_TRUE]), np.array([roulette.K_TRUE]), np.array([roulette.MU_R_TRUE])
-)
+(t_true,), (phi_true,) = roulette.leaving(np.array([ex.v0]), np.array([ex.k]), np.array([ex.mu_r]))
 print(f"3 predictions in {time.perf_counter() - start:.0f} s")
 print(f"predicted: leaves at {np.mean(t_pred):.3f} +- {np.std(t_pred):.3f} s (true {t_true:.3f} s)")
 print(
