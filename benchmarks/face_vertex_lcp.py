@@ -1,6 +1,7 @@
 """A face's contact as the linear complementarity problem of its vertices, each with its own
 normal force and Coulomb friction along its own slip, at a state of a random throw: the check
-behind docs/contact.md section 7's account of a d12 that no mode of the engine fits.
+behind docs/contact.md section 7's account of a d12 that neither a face's limit surface nor
+a pair fits, and that a face on a support of three vertices (section 2) does.
 
 The throw (`contact_throws.throws(n, seed)[index]`, the d12 of `jaxrb.dice`) is simulated to
 time `--t` and the face whose vertices are lowest is taken. With the body's mass matrix M

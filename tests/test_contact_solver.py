@@ -9,7 +9,14 @@ from programs import persistent
 
 import jaxrb
 from jaxrb.contact._features import contact_model
-from jaxrb.contact._modes import CandidateTable, flight_mode, geometry, sliding_solver, solve_mode
+from jaxrb.contact._modes import (
+    FACE,
+    CandidateTable,
+    flight_mode,
+    geometry,
+    sliding_solver,
+    solve_mode,
+)
 
 TOL = jaxrb.contact.ContactOptions().resolved(jnp.float64)
 
@@ -193,3 +200,120 @@ def test_mode_choice_equals_testing_every_mode():
             np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
         # and most states have a consistent mode of contact
         assert np.mean(np.asarray(chosen.kind) != 0) > 0.5
+
+
+# ------------------------------------- a face that slides on three of its vertices (a support)
+
+
+def _flat_turning_states(model, key, n):
+    """`n` states of the d12 of `model` lying flat on its first face and turning about the
+    vertical at 1-6 rad/s (either way), about a random point within the face's
+    circumcircle: its vertices slide at different speeds in different directions."""
+    corners = np.asarray(model.corners)
+    face = list(model.face_points[0])
+    normal = np.asarray(model.normals[0])
+    axis = np.cross(normal, [0.0, 0.0, -1.0])
+    axis = axis / np.linalg.norm(axis)
+    base = jaxrb.axis_angle_to_quat(jnp.asarray(axis), np.arccos(np.clip(-normal[2], -1, 1)))
+    world = corners @ np.asarray(jaxrb.quat_to_matrix(base)).T
+    height = -np.min(world[:, 2])
+    centre = world[face].mean(axis=0) * np.array([1.0, 1.0, 0.0])
+    circumradius = np.max(np.linalg.norm(world[face] - world[face].mean(axis=0), axis=1))
+    k = jax.random.split(key, 4)
+    yaw = jax.random.uniform(k[0], (n,), maxval=2 * np.pi)
+    angle = jax.random.uniform(k[1], (n,), maxval=2 * np.pi)
+    distance = circumradius * jnp.sqrt(jax.random.uniform(k[2], (n,)))
+    turn_way = jnp.where(jnp.arange(n) % 2 == 0, 1.0, -1.0)
+    spin = jax.random.uniform(k[3], (n,), minval=1.0, maxval=6.0) * turn_way
+    up = jnp.array([0.0, 0.0, 1.0])
+
+    def place(yaw, angle, distance, spin):
+        turn = jaxrb.axis_angle_to_quat(up, yaw)
+        q = jaxrb.quat_multiply(turn, base)
+        offset = distance * jnp.array([jnp.cos(angle), jnp.sin(angle), 0.0])
+        pivot = jaxrb.quat_to_matrix(turn) @ (centre + offset)  # from the mass centre
+        w = spin * up
+        omega = jaxrb.quat_to_matrix(q).T @ w
+        return jaxrb.State(jnp.array([0.0, 0.0, height]), q, jnp.cross(w, -pivot), omega)
+
+    return jax.vmap(place)(yaw, angle, distance, spin)
+
+
+def _vertex_problem(scene, state, vertices):
+    """The normal rows of `vertices` (body-frame offsets from the mass centre (K, 3)) of a
+    body on the floor (normal +z), each vertex with its own Coulomb friction along its own
+    slip: a = A f + b, a the vertices' normal accelerations, f their normal forces (N);
+    A = J M^-1 C^T with J_i = (n, r_i x n), C_i = (n - mu s_i, r_i x (n - mu s_i)), and b
+    the accelerations without contact force (gravity, the centripetal terms; the drag of
+    the mass centre is horizontal here)."""
+    body, mu = scene.body, float(scene.floor.friction)
+    R = np.asarray(jaxrb.quat_to_matrix(jnp.asarray(state.quat)))
+    inertia = R @ np.asarray(body.inertia_matrix) @ R.T
+    w = R @ np.asarray(state.omega)
+    r = vertices @ R.T
+    n = np.array([0.0, 0.0, 1.0])
+    slip = np.asarray(state.vel) + np.cross(w, r)
+    slip = slip - np.outer(slip @ n, n)
+    force = n - mu * slip / np.linalg.norm(slip, axis=1, keepdims=True)
+    m_inv = np.zeros((6, 6))
+    m_inv[:3, :3] = np.eye(3) / float(body.mass)
+    m_inv[3:, 3:] = np.linalg.inv(inertia)
+    J = np.concatenate([np.broadcast_to(n, r.shape), np.cross(r, n)], axis=1)
+    C = np.concatenate([force, np.cross(r, force)], axis=1)
+    w_dot = np.linalg.solve(inertia, -np.cross(w, inertia @ w))
+    b = -9.81 + (np.cross(w_dot, r) + np.cross(w, np.cross(w, r))) @ n
+    return J @ m_inv @ C.T, b
+
+
+@persistent
+def _support_forces(states, friction, support):
+    """The normal forces (N) of the `support` vertices (n, 3) of a d12's first face in the
+    sliding face mode on them, from the mode's multipliers."""
+    shape = CHOICE_SHAPES[1]
+    model = contact_model(shape)
+    table = CandidateTable(model)
+
+    def one(state, mu, support):
+        i = jnp.argmax(jnp.all(jnp.asarray(table.support) == support, axis=1))
+        mode = table.mode(i, flight_mode(jnp.float64))
+        sol = solve_mode(0.0, state, mode, _scene(shape, mu), model, TOL)
+        return sol.rows.support_map @ sol.lam[:3]
+
+    return jax.vmap(one)(states, friction, support)
+
+
+def test_a_face_that_cannot_slide_flat_on_its_limit_surface_slides_on_three_vertices():
+    """A d12 turning flat on a face with friction 0.75-0.95: above 0.62 the centre of
+    pressure of a face sliding with its limit surface can fall outside the face (a
+    pentagon's inradius is 0.62 of the body's), and then no mode of the face's limit
+    surface, an edge or a corner may fit (17 of these 48 states before the face could
+    slide on a support). Each state's mode is consistent; where the face slides on three of
+    its vertices, each with its own friction, their normal forces are those of the
+    vertices' own complementarity problem, solved independently (a = A f + b = 0 on those
+    three, f >= 0; to 1e-9 of the weight), and the face's other two vertices stay on the
+    floor (zero normal acceleration, no force)."""
+    model = contact_model(CHOICE_SHAPES[1])
+    states = _flat_turning_states(model, jax.random.key(5), 48)
+    friction = jax.random.uniform(jax.random.key(6), (48,), minval=0.75, maxval=0.95)
+    chosen, consistent, _, _, resting = _choices(1, states, friction)
+    assert np.all(np.asarray(resting) == 5)  # the whole pentagon touches
+    assert np.all(np.asarray(consistent))
+    on_support = np.asarray(chosen.support[:, 0]) >= 0
+    assert np.all(np.asarray(chosen.kind)[on_support] == FACE)
+    assert on_support.sum() >= 10, on_support.sum()
+    forces = np.asarray(_support_forces(states, friction, chosen.support))
+    face = list(model.face_points[0])
+    corners = np.asarray(model.corners)
+    weight = 0.004 * 9.81
+    for m in np.flatnonzero(on_support):
+        state = jax.tree.map(lambda x, m=m: np.asarray(x[m]), states)
+        scene = _scene(CHOICE_SHAPES[1], float(friction[m]))
+        support = list(np.asarray(chosen.support[m]))
+        A, b = _vertex_problem(scene, state, corners[face])
+        on = [face.index(p) for p in support]
+        f = np.linalg.solve(A[np.ix_(on, on)], -b[on])
+        assert np.all(f >= -1e-9 * weight)
+        np.testing.assert_allclose(forces[m], f, rtol=0, atol=1e-9 * weight)
+        full = np.zeros(len(face))
+        full[on] = f
+        np.testing.assert_allclose(A @ full + b, 0.0, atol=1e-9 * 9.81)

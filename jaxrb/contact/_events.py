@@ -11,11 +11,12 @@ set to a large value; the event is the first zero of their minimum:
   speed less half the stop speed `slip_stop`, or, for a slide that started from rest, its slip
   along the direction it started in plus half the blend speed (they fire when the slip has
   stopped or turned back; a slip that only turns, as a coin's on its rim, does not end a
-  segment); and a face's centre-of-pressure
-  margin (m/s^2: N/m times the distance inside its support region over its friction
-  radius); and on a curved surface whose curvature jumps (a rounded cone's tip), the
-  junction margin times the mode's `side` (it fires when the ball passes to the other part,
-  so that no step straddles the jump).
+  segment; a face on a support of three vertices: the slowest vertex's slip speed less
+  half the stop speed); and a face's centre-of-pressure margin (m/s^2: N/m times the
+  distance inside its support region over its friction radius; on a support: the least of
+  its three vertices' normal forces); and on a curved surface whose curvature jumps (a
+  rounded cone's tip), the junction margin times the mode's `side` (it fires when the ball
+  passes to the other part, so that no step straddles the jump).
 
 Every condition must start positive: diffrax fires on a downward crossing only, so one that
 started at or below zero would disarm the whole event (impacts included). A condition that
@@ -34,7 +35,7 @@ import optimistix as optx
 
 from .._linalg import vecmat
 from .._quaternion import _safe_norm
-from ._modes import FACE, PAIR, POINT, Solution, active_points, point_coefficients
+from ._modes import FACE, PAIR, POINT, Solution, active_points, on_support, point_coefficients
 
 NORMAL_A, NORMAL_B, CONE_A, CONE_B, AXIAL, SLIP_A, SLIP_B, COP, JUNCTION = range(9)
 NUM_FORCE_CONDITIONS = 9
@@ -72,6 +73,7 @@ def force_margins(lam, rows, mode, model, geom, mu) -> jax.Array:
     _, t1, t2 = geom.frame_of(0)  # a face meets a plane: one frame
     couple_body = vecmat(lam[1] * t1 + lam[2] * t2, geom.R)
     cop = model.cop_margin(mode.face, lam[0], couple_body) / rows.rho
+    cop = jnp.where(on_support(mode), jnp.min(rows.support_map @ lam[:3]), cop)
     return jnp.stack(
         [
             jnp.where(holds, lam[0], big),
@@ -86,14 +88,22 @@ def force_margins(lam, rows, mode, model, geom, mu) -> jax.Array:
     )
 
 
+def slowest_support_vertex(geom, mode) -> jax.Array:
+    """The point index of the slowest sliding vertex of a support (`Mode.support`; any
+    other mode: its point a)."""
+    vertices = jnp.where(on_support(mode), mode.support, mode.a)
+    return vertices[jnp.argmin(_safe_norm(geom.slip[vertices]))]
+
+
 def mode_slips(sol: Solution, mode):
     """The slips whose end the slip conditions watch (m/s, world; (2, 3)): at slot a a
-    point's slip or a face's slip twist, at slot b the pair's second point's; and whether
-    each slides in `mode` (2,)."""
+    point's slip or a face's slip twist (a support: its slowest vertex's slip), at slot b
+    the pair's second point's; and whether each slides in `mode` (2,)."""
     kind, geom = mode.kind, sol.geom
-    on_face = kind == FACE
-    holds = (kind == POINT) | (kind == PAIR) | on_face
-    slips = jnp.stack([jnp.where(on_face, sol.rows.twist, geom.slip[mode.a]), geom.slip[mode.b]])
+    on_face = (kind == FACE) & ~on_support(mode)
+    holds = (kind == POINT) | (kind == PAIR) | (kind == FACE)
+    slip_a = geom.slip[slowest_support_vertex(geom, mode)]
+    slips = jnp.stack([jnp.where(on_face, sol.rows.twist, slip_a), geom.slip[mode.b]])
     return slips, jnp.stack([holds & ~mode.stick[0], (kind == PAIR) & ~mode.stick[1]])
 
 

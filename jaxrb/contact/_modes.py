@@ -16,7 +16,14 @@ Row slots: points and pairs use 0: normal at a, 1: normal at b, 2-3: tangential 
 4-5: tangential at b (a pair's tangential rows run across and along its line; a sticking pair
 has only one row along the line, slot 3, since both ends move along it together); a face uses
 0: normal at its centre, 1-2: tilt about t1, t2, 3-4: tangential at its centre, 5: spin.
+
+A sliding face's friction is either its limit surface about its centre (an ellipsoid in the
+slip twist), or, on a `support` of three of its vertices, each vertex's own Coulomb friction
+opposing its own slip with the vertex's share of the normal load (docs/contact.md, section
+2): the rows are the face's, only the force columns differ.
 """
+
+import itertools
 
 import equinox as eqx
 import equinox.internal as eqxi
@@ -25,7 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._dynamics import accelerations
-from .._linalg import cross, dot, matmul, matvec, solve as small_solve, vecmat
+from .._linalg import cross, dot, inverse3, matmul, matvec, solve as small_solve, vecmat
 from .._quaternion import _safe_norm, quat_normalize, quat_to_matrix
 from .._rates import quat_rate
 from .._state import State
@@ -54,6 +61,8 @@ class Mode(eqx.Module):
     - `seed`: (3,) body-frame direction used for a rim point when its cap lies flat.
     - `side`: +1 or -1, the sign of the surface's `region` margin during the segment (a
       curved surface whose curvature jumps: which part the ball touches).
+    - `support`: (3,) int, for a sliding face that rests on three of its vertices with
+      their own friction, those vertices' point indices; -1 for every other mode.
     """
 
     kind: jax.Array
@@ -66,6 +75,13 @@ class Mode(eqx.Module):
     from_rest: jax.Array
     seed: jax.Array
     side: jax.Array
+    support: jax.Array
+
+
+def on_support(mode: Mode) -> jax.Array:
+    """Whether `mode` is a face sliding on three of its vertices, each with its own friction
+    (a support's mode made to stick is the face sticking)."""
+    return (mode.kind == FACE) & (mode.support[0] >= 0) & ~mode.stick[0]
 
 
 def flight_mode(dtype) -> Mode:
@@ -81,13 +97,16 @@ def flight_mode(dtype) -> Mode:
         from_rest=jnp.zeros(2, bool),
         seed=jnp.array([1.0, 0.0, 0.0], dtype),
         side=jnp.ones((), dtype),
+        support=jnp.full(3, -1, jnp.int32),
     )
 
 
 class CandidateTable:
     """Every mode a shape can be in, in order of preference (more contact first, stick
-    before slide), as static numpy arrays (C,): kind, a, b, face, stick (C, 2), and the masks
-    (C, P) of the points each one holds on the floor (`active`) and holds still (`sticking`).
+    before slide), as static numpy arrays (C,): kind, a, b, face, stick (C, 2), support
+    (C, 3), and the masks (C, P) of the points each one holds on the floor (`active`) and
+    holds still (`sticking`). A face slides first with its limit surface, then on each
+    set of three of its vertices (`Mode.support`) in the order of their indices.
 
     `candidates`: the indices of the modes that can apply when the body rests on the floor
     with some of its points. All touching points of a convex body lie in one supporting
@@ -99,21 +118,26 @@ class CandidateTable:
 
     def __init__(self, model):
         P = model.num_points
-        rows = []  # (kind, a, b, face, stick_a, stick_b, active points, sticking points)
+        # (kind, a, b, face, stick_a, stick_b, active points, sticking points, support)
+        rows = []
+        none = (-1, -1, -1)
         for f, pts in enumerate(model.face_points):
             for stick in (True, False):
-                rows.append((FACE, pts[0], pts[0], f, stick, False, pts, pts if stick else ()))
+                held = pts if stick else ()
+                rows.append((FACE, pts[0], pts[0], f, stick, False, pts, held, none))
+            for support in itertools.combinations(sorted(pts), 3):
+                rows.append((FACE, pts[0], pts[0], f, False, False, pts, (), support))
         smooth = model.smooth_points  # these slide only
         for a, b in model.pairs:
             for sa, sb in ((True, True), (True, False), (False, True), (False, False)):
                 if (sa and a in smooth) or (sb and b in smooth):
                     continue
                 held = tuple(p for p, s in ((a, sa), (b, sb)) if s)
-                rows.append((PAIR, a, b, 0, sa, sb, (a, b), held))
+                rows.append((PAIR, a, b, 0, sa, sb, (a, b), held, none))
         for a in model.point_features:
             for stick in (True, False) if a not in smooth else (False,):
-                rows.append((POINT, a, a, 0, stick, False, (a,), (a,) if stick else ()))
-        rows.append((FLIGHT, 0, 0, 0, False, False, (), ()))
+                rows.append((POINT, a, a, 0, stick, False, (a,), (a,) if stick else (), none))
+        rows.append((FLIGHT, 0, 0, 0, False, False, (), (), none))
 
         def mask(points):
             m = np.zeros(P, bool)
@@ -125,6 +149,7 @@ class CandidateTable:
         self.b = np.array([r[2] for r in rows], np.int32)
         self.face = np.array([r[3] for r in rows], np.int32)
         self.stick = np.array([(r[4], r[5]) for r in rows], bool)
+        self.support = np.array([r[8] for r in rows], np.int32)
         self.active = np.stack([mask(r[6]) for r in rows])
         self.sticking = np.stack([mask(r[7]) for r in rows])
         faces = face_point_masks(model)[: model.num_faces]
@@ -192,6 +217,7 @@ class CandidateTable:
             from_rest=like.from_rest,
             seed=like.seed,
             side=like.side,
+            support=jnp.asarray(self.support)[i],
         )
 
 
@@ -344,7 +370,9 @@ class Rows(eqx.Module):
     - `vel`: (6,) the rows' velocities J u; `pos`: (6,) position residuals of the holonomic
       rows (gaps, tilts), 0 for the others;
     - `mask`: (6,) used rows; `holonomic`: (6,) used rows that constrain positions;
-    - `rho`: the face's friction radius (m); `twist`: the face's slip twist (v.t1, v.t2, rho w.n).
+    - `rho`: the face's friction radius (m); `twist`: the face's slip twist (v.t1, v.t2, rho w.n);
+    - `support_map`: (3, 3) the normal forces of a support's three vertices per multiplier of
+      slots 0-2 (f = support_map lam[:3]); zero for every other mode.
     """
 
     J: jax.Array
@@ -356,6 +384,29 @@ class Rows(eqx.Module):
     holonomic: jax.Array
     rho: jax.Array
     twist: jax.Array
+    support_map: jax.Array
+
+
+def support_friction(geom, mode, rc, mu):
+    """A support's (`Mode.support`) vertices' friction, per multiplier of the face's rows 0-2
+    (normal at the centre, tilts about t1 and t2): the vertices' normal forces f (3,) with
+    sum f = lam_0 and sum f_i (q_i x n) = lam_1 t1 + lam_2 t2 (q_i the vertex's offset from
+    the face's centre `rc`, world), f = G^-1 lam; each vertex's friction -mu_i f_i s_i
+    opposes its own unit slip s_i. Returns (G^-1 (3, 3), the friction force (3, 3) and its
+    couple about the face's centre (3, 3) per unit of each multiplier, world). With three
+    vertices that are not on one line G is invertible; for any other mode G is the
+    identity and the map is returned as zero."""
+    n, t1, t2 = geom.frame_of(0)  # a face meets a plane: one frame
+    used = on_support(mode)
+    vertices = jnp.where(used, mode.support, 0)
+    q = geom.r[vertices] - rc
+    arms = cross(q, n)  # (3, 3): per vertex
+    G = jnp.stack([jnp.ones(3, q.dtype), arms @ t1, arms @ t2])
+    G_inv = jnp.where(used, inverse3(jnp.where(used, G, jnp.eye(3, dtype=q.dtype))), 0.0)
+    friction = -mu[vertices, None] * unit_or(geom.slip[vertices], jnp.zeros_like(q))  # (3, 3)
+    force = G_inv.T @ friction  # row k: sum_i G_inv[i, k] F_i
+    couple = G_inv.T @ cross(q, friction)
+    return G_inv, force, couple
 
 
 def face_twist(state, geom, model, face):
@@ -370,9 +421,11 @@ def face_twist(state, geom, model, face):
     return jnp.stack([dot(vc, t1), dot(vc, t2), rho * dot(geom.w, n)]), rho
 
 
-def _with_face_rows(state, geom, mode, hat_f, mu, scene, model, point_rows):
+def _with_face_rows(state, geom, mode, hat_f, mu, scene, model, point_rows, supports=True):
     """The rows of a face mode (normal at the face's centre, tilts about t1 and t2,
-    tangential at the centre, spin), or `point_rows` for the other kinds."""
+    tangential at the centre, spin), or `point_rows` for the other kinds; `mu` (P,).
+    `supports`: whether a support's vertices' friction enters the force columns (static;
+    the projections use only the rows)."""
     p_d, p_r, p_rdot, p_dC, p_mask, p_pos = point_rows
     dtype = state.pos.dtype
     (n, t1, t2), R, w = geom.frame_of(0), geom.R, geom.w  # a face meets a plane: one frame
@@ -387,9 +440,22 @@ def _with_face_rows(state, geom, mode, hat_f, mu, scene, model, point_rows):
     centre_gap = scene.floor.gap(state.pos + rc)
     # d/dt (nu_w . t2) = w . t1 and d/dt (-nu_w . t1) = w . t2 near nu_w = -n
     f_pos = jnp.stack([centre_gap, dot(nu_w, t2), -dot(nu_w, t1), zero, zero, zero])
-    slide_force = n - mu * (hat_f[0] * t1 + hat_f[1] * t2)
+    # sliding: the limit surface about the centre, or each support vertex's own friction
+    if supports and max(len(f) for f in model.face_points) >= 3:  # a shape with supports
+        support = on_support(mode)
+        support_map, v_force, v_couple = only_where_needed(
+            support,
+            lambda: support_friction(geom, mode, rc, mu),
+            lambda: (jnp.zeros((3, 3), dtype),) * 3,
+        )
+    else:
+        support, support_map, v_force, v_couple = False, jnp.zeros((3, 3), dtype), 0.0, 0.0
+    slide_force = n - mu[0] * (hat_f[0] * t1 + hat_f[1] * t2)
+    slide_couple = -mu[0] * rho * hat_f[2] * n
     f_dC = jnp.concatenate([jnp.where(stick, n, slide_force)[None], f_d[1:]])
-    f_kC = jnp.concatenate([jnp.where(stick, zero3, -mu * rho * hat_f[2] * n)[None], f_k[1:]])
+    f_kC = jnp.concatenate([jnp.where(stick, zero3, slide_couple)[None], f_k[1:]])
+    f_dC = f_dC.at[:3].set(jnp.where(support, f_d[:3] + v_force, f_dC[:3]))
+    f_kC = f_kC.at[:3].set(jnp.where(support, f_k[:3] + v_couple, f_kC[:3]))
     f_mask = jnp.stack([is_face] * 3 + [is_face & stick] * 3)
     mask = jnp.where(is_face, f_mask, p_mask)
     holonomic = mask & jnp.where(
@@ -409,6 +475,7 @@ def _with_face_rows(state, geom, mode, hat_f, mu, scene, model, point_rows):
         holonomic,
         twist,
         rho,
+        support_map,
     )
 
 
@@ -428,12 +495,15 @@ def resisting_couple(w, n, mu_r, mu_s, radius, blend):
     return -radius * (mu_r * e_roll + mu_s * e_spin * n)
 
 
-def mode_rows(state, geom: Geometry, mode: Mode, hats, mu, scene, model, blend=None) -> Rows:
+def mode_rows(
+    state, geom: Geometry, mode: Mode, hats, mu, scene, model, blend=None, supports=True
+) -> Rows:
     """The rows of `mode` at `state`; `hats` = (slip direction at a, at b, face twist
     direction) that sliding friction (coefficient `mu`, one per contact point (P,) or one
     for all) opposes (unit, or zero). `blend` (m/s): the speed below which a ball's rolling
-    and spin resistance fade (`resisting_couple`); None leaves them out of the force columns
-    (for the projections, which use only the rows)."""
+    and spin resistance fade (`resisting_couple`); None leaves them, and a support's
+    vertices' friction, out of the force columns (for the projections, which use only the
+    rows); `supports` False (static) leaves out the latter alone."""
     dtype = state.pos.dtype
     w = geom.w
     mu = jnp.broadcast_to(mu, (model.num_points,))
@@ -484,9 +554,18 @@ def mode_rows(state, geom: Geometry, mode: Mode, hats, mu, scene, model, blend=N
         d, r, r_dot, dC, mask, pos = p_d, p_r, p_rdot, p_dC, p_mask, p_pos
         holonomic = mask & jnp.array([True, True, False, False, False, False])
         twist, rho = jnp.zeros(3, dtype), jnp.ones((), dtype)
+        support_map = jnp.zeros((3, 3), dtype)
     else:
-        d, r, r_dot, k, dC, kC, mask, pos, holonomic, twist, rho = _with_face_rows(
-            state, geom, mode, hat_f, mu[0], scene, model, (p_d, p_r, p_rdot, p_dC, p_mask, p_pos)
+        d, r, r_dot, k, dC, kC, mask, pos, holonomic, twist, rho, support_map = _with_face_rows(
+            state,
+            geom,
+            mode,
+            hat_f,
+            mu,
+            scene,
+            model,
+            (p_d, p_r, p_rdot, p_dC, p_mask, p_pos),
+            supports=supports and blend is not None,
         )
     J = jnp.concatenate([d, cross(r, d) + k], axis=1)
     C = jnp.concatenate([dC, cross(r, dC) + kC], axis=1)
@@ -510,6 +589,7 @@ def mode_rows(state, geom: Geometry, mode: Mode, hats, mu, scene, model, blend=N
         holonomic=holonomic,
         rho=rho,
         twist=twist,
+        support_map=support_map,
     )
 
 
@@ -599,14 +679,17 @@ class Solution(eqx.Module):
         return jnp.stack([dot(ac, t1), dot(ac, t2), rhos[face] * dot(self.alpha, n)])
 
 
-def solve_mode(t, state: State, mode: Mode, scene, model, tol, hats=None, geom=None) -> Solution:
+def solve_mode(
+    t, state: State, mode: Mode, scene, model, tol, hats=None, geom=None, supports=True
+) -> Solution:
     """Accelerations and contact forces of `mode` at `state` (unit quaternion).
 
     `tol`: the resolved `Tolerances`; its `stabilisation` beta (1/s) makes constraint
     residuals of the holonomic rows decay like (1 + beta t) exp(-beta t) and slips of sticking
     rows like exp(-beta t) instead of drifting (Baumgarte); on the constraint manifold it has
     no effect. `hats`: the sliding directions (default: `sliding_hats`); `geom`: the state's
-    `geometry` if already computed.
+    `geometry` if already computed; `supports` (static): False for a mode known not to be a
+    support (its friction is then not traced).
     """
     beta = tol.stabilisation
     body = scene.body
@@ -617,16 +700,44 @@ def solve_mode(t, state: State, mode: Mode, scene, model, tol, hats=None, geom=N
         twist, _ = face_twist(state, geom, model, mode.face)
         hats = sliding_hats(geom, twist, mode, tol.slip_blend)
     mu, _, _ = point_coefficients(scene, model)
-    rows = mode_rows(state, geom, mode, hats, mu, scene, model, blend=tol.slip_blend)
     acc0, omega_dot0 = accelerations(t, state, scene)
     u0_dot = jnp.concatenate([acc0, matvec(geom.R, omega_dot0)])
-    beta = jnp.asarray(beta, dtype)
-    stab = jnp.where(rows.holonomic, 2 * beta * rows.vel + beta**2 * rows.pos, beta * rows.vel)
-    minv_C = inverse_mass_columns(body, geom.R, rows.C)
-    lam = solve_rows(rows, minv_C, -(matvec(rows.J, u0_dot) + rows.bias + stab))
-    u_dot = u0_dot + vecmat(lam, minv_C)
+
+    def constrained():  # the rows, their multipliers and the accelerations they add
+        rows = mode_rows(state, geom, mode, hats, mu, scene, model, tol.slip_blend, supports)
+        b = jnp.asarray(beta, dtype)
+        stab = jnp.where(rows.holonomic, 2 * b * rows.vel + b**2 * rows.pos, b * rows.vel)
+        minv_C = inverse_mass_columns(body, geom.R, rows.C)
+        lam = solve_rows(rows, minv_C, -(matvec(rows.J, u0_dot) + rows.bias + stab))
+        return rows, lam, vecmat(lam, minv_C)
+
+    def free():  # in flight: no row (every step's event function and step limit ask)
+        return no_rows(dtype), jnp.zeros(NUM_ROWS, dtype), jnp.zeros(6, dtype)
+
+    rows, lam, added = only_where_needed(mode.kind != FLIGHT, constrained, free)
+    u_dot = u0_dot + added
     acc, alpha = u_dot[:3], u_dot[3:]
     return Solution(acc, alpha, vecmat(alpha, geom.R), lam, rows, geom, hats)
+
+
+def no_rows(dtype) -> Rows:
+    """The `Rows` of flight: none used (a unit friction radius, so that nothing divides by
+    zero)."""
+    zeros = jnp.zeros((NUM_ROWS, 6), dtype)
+    unused = jnp.zeros(NUM_ROWS, bool)
+    zero = jnp.zeros(NUM_ROWS, dtype)
+    return Rows(
+        J=zeros,
+        C=zeros,
+        bias=zero,
+        vel=zero,
+        pos=zero,
+        mask=unused,
+        holonomic=unused,
+        rho=jnp.ones((), dtype),
+        twist=jnp.zeros(3, dtype),
+        support_map=jnp.zeros((3, 3), dtype),
+    )
 
 
 class SlidingSolver(eqx.Module):
@@ -677,7 +788,8 @@ def column_rates(geom: Geometry, mode: Mode, mu, model) -> jax.Array:
     sliding directions (at a, at b, the face's twist): the columns are affine in them, and
     only slot 0 (a sliding point a, or a sliding face) and slot 1 (a sliding point b) move,
     with the friction force -mu s_hat at the point (a face: -mu (s_1 t1 + s_2 t2) at its
-    centre, and the couple -mu rho s_3 n). Written out beside `mode_rows`' columns (the
+    centre, and the couple -mu rho s_3 n; a support's vertices' friction follows their own
+    slips, not these directions). Written out beside `mode_rows`' columns (the
     derivative of `mode_rows` traced a second copy of it into every contact program);
     `test_sliding_solver_equals_the_direct_solve` holds the two equal."""
     dtype = geom.R.dtype
@@ -696,7 +808,7 @@ def column_rates(geom: Geometry, mode: Mode, mu, model) -> jax.Array:
     if model.num_faces:
         n, t1, t2 = geom.frame_of(0)  # a face meets a plane: one frame
         _, centres, rhos = model.face_frame()
-        slide_f = jnp.where(is_face & ~mode.stick[0], -mu[0], 0.0)
+        slide_f = jnp.where(is_face & ~mode.stick[0] & ~on_support(mode), -mu[0], 0.0)
         zero3 = jnp.zeros(3, dtype)
         force = slide_f * jnp.stack([t1, t2, zero3])
         couple = slide_f * jnp.stack([zero3, zero3, rhos[mode.face] * n])

@@ -13,7 +13,16 @@ import jax.numpy as jnp
 from .._linalg import solve as small_solve
 from .._quaternion import _safe_norm, axis_angle_to_quat, quat_multiply, quat_normalize
 from .._state import State
-from ._modes import FACE, PAIR, POINT, face_twist, geometry, inverse_mass_columns, mode_rows
+from ._modes import (
+    FACE,
+    PAIR,
+    POINT,
+    face_twist,
+    geometry,
+    inverse_mass_columns,
+    mode_rows,
+    on_support,
+)
 
 
 def _correction(rows_J, mask, residual, body, R):
@@ -60,7 +69,9 @@ def project_velocities(state: State, mode, scene, model, slip_stop) -> State:
     kind = mode.kind
     still_a = _safe_norm(geom.slip[mode.a]) <= slip_stop
     still_b = _safe_norm(geom.slip[mode.b]) <= slip_stop
+    # (a support's vertices slide: its mode is chosen only when every one of them slips)
     still_f = _safe_norm(face_twist(state, geom, model, mode.face)[0]) <= slip_stop
+    still_f = still_f & ~on_support(mode)
     point_like = (kind == POINT) | (kind == PAIR)
     extra = jnp.where(
         kind == FACE,

@@ -24,6 +24,7 @@ from ._modes import (
     cross,
     face_twist,
     inverse_mass_columns,
+    on_support,
     only_where_needed,
     point_coefficients,
     sliding_solver,
@@ -171,7 +172,9 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
     slides_a = ((mode.kind == POINT) | (mode.kind == PAIR)) & ~mode.stick[0]
     rest_a = slides_a & zero_slip[mode.a]
     rest_b = (mode.kind == PAIR) & ~mode.stick[1] & zero_slip[mode.b]
-    rest_f = (mode.kind == FACE) & ~mode.stick[0] & (jnp.linalg.norm(twist) <= tol.slip_stop)
+    support = on_support(mode)
+    rest_f = (mode.kind == FACE) & ~mode.stick[0] & ~support
+    rest_f = rest_f & (jnp.linalg.norm(twist) <= tol.slip_stop)
 
     # the mode's solution for any sliding directions, at the cost of a 2 x 2 solve each
     solve = sliding_solver(t, state, mode, scene, model, tol, geom)
@@ -188,6 +191,7 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
         tol,
         hats=zero_hats,
         geom=geom,
+        supports=False,  # made to stick: never a support
     )
     lam, d = held.lam, held.rows.J[:, :3]
     need_a = lam[2] * d[2] + lam[3] * d[3]
@@ -347,12 +351,14 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
             jnp.stack([rest_a | rest_f, rest_b]),
         ),
     )
-    # a sticking face needs its slip twist at rest (its corners' slips may be larger)
+    # a sticking face needs its slip twist at rest (its corners' slips may be larger); a
+    # support, each of its vertices sliding (its friction follows their slips)
     still = jnp.where(
         mode.kind == FACE,
         ~mode.stick[0] | (jnp.linalg.norm(twist) <= tol.slip_stop),
         ~(mode.stick[0] & ~zero_slip[mode.a]) & ~(mode.stick[1] & ~zero_slip[mode.b]),
     )
+    still = still & ~(support & jnp.any(zero_slip[jnp.where(support, mode.support, 0)]))
     # the Painlevé paradox: a contact that slides (not from rest) on a normal problem that
     # is not a P-matrix
     slides = ((mode.kind == POINT) | (mode.kind == PAIR)) & (
@@ -388,9 +394,15 @@ def exclusions(table, candidates, model, old, trigger):
         & (jnp.asarray(table.b)[candidates] == old.b)
     )
     ex_axial = same_pair & stick[:, 0] & stick[:, 1]
+    # the centre of pressure left the face (a support: a vertex's normal force reached
+    # zero): that face's limit-surface modes, or that support, no longer hold; the face's
+    # other supports may (each vertex friction's own load distribution)
+    support = jnp.asarray(table.support)[candidates]
+    same_support = jnp.all(support == old.support, axis=1)
+    ex_cop = same_face & jnp.where(on_support(old), same_support, support[:, 0] < 0)
     return jnp.select(
         [k == NORMAL_A, k == NORMAL_B, k == CONE_A, k == CONE_B, k == AXIAL, k == COP],
-        [ex_normal_a, ex_normal_b, ex_cone_a, ex_cone_b, ex_axial, same_face],
+        [ex_normal_a, ex_normal_b, ex_cone_a, ex_cone_b, ex_axial, ex_cop],
         jnp.zeros(candidates.shape, bool),
     )
 

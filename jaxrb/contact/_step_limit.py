@@ -33,8 +33,8 @@ import diffrax as dfx
 import jax
 import jax.numpy as jnp
 
-from ._events import mode_slips
-from ._modes import FACE, FLIGHT, active_points, no_derivative
+from ._events import mode_slips, slowest_support_vertex
+from ._modes import FACE, FLIGHT, active_points, no_derivative, on_support
 from ._step_end import LIMIT
 
 GAP_SHRINK = 0.8  # k: the fraction of a gap a step may close
@@ -84,7 +84,9 @@ def slip_step_limit(sol, mode, model, tol) -> jax.Array:
     slips, sliding = mode_slips(sol, mode)
     slides = sliding & ~mode.from_rest
     accelerations = geom.tangential(sol.point_accelerations())
-    rate_a = jnp.where(mode.kind == FACE, sol.twist_rate(model, mode.face), accelerations[mode.a])
+    on_face = (mode.kind == FACE) & ~on_support(mode)
+    slowest = accelerations[slowest_support_vertex(geom, mode)]  # point a unless a support
+    rate_a = jnp.where(on_face, sol.twist_rate(model, mode.face), slowest)
     rates = jnp.stack([rate_a, accelerations[mode.b]])
     speed = jnp.linalg.norm(slips, axis=-1)
     change = jnp.linalg.norm(rates, axis=-1) + jnp.finfo(dtype).tiny
