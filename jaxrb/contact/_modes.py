@@ -600,18 +600,13 @@ def inverse_mass_columns(body, R, C):
 
 
 def solve_rows(rows: Rows, minv_C, rhs):
-    """lambda with (J M^-1 C) lambda = rhs on the used rows (0 on the others; no solve where
-    no row is used, as in flight)."""
-    dtype = rhs.dtype
-
-    def solve():
-        A = matmul(rows.J, minv_C.T)
-        both = rows.mask[:, None] & rows.mask[None, :]
-        A = jnp.where(both, A, jnp.eye(NUM_ROWS, dtype=dtype))
-        lam = small_solve(A, jnp.where(rows.mask, rhs, 0.0))
-        return jnp.where(rows.mask, lam, 0.0)
-
-    return only_where_needed(rows.mask, solve, lambda: jnp.zeros_like(rhs))
+    """lambda with (J M^-1 C) lambda = rhs on the used rows (0 on the others). `solve_mode`
+    calls it only off flight (a flight's rows are none: `no_rows`)."""
+    A = matmul(rows.J, minv_C.T)
+    both = rows.mask[:, None] & rows.mask[None, :]
+    A = jnp.where(both, A, jnp.eye(NUM_ROWS, dtype=rhs.dtype))
+    lam = small_solve(A, jnp.where(rows.mask, rhs, 0.0))
+    return jnp.where(rows.mask, lam, 0.0)
 
 
 def only_where_needed(needed, compute, otherwise):
