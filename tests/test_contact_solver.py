@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from programs import persistent
+from turning_states import flat_turning_states
 
 import jaxrb
 from jaxrb.contact._features import contact_model
@@ -205,40 +206,6 @@ def test_mode_choice_equals_testing_every_mode():
 # ------------------------------------- a face that slides on three of its vertices (a support)
 
 
-def _flat_turning_states(model, key, n):
-    """`n` states of the d12 of `model` lying flat on its first face and turning about the
-    vertical at 1-6 rad/s (either way), about a random point within the face's
-    circumcircle: its vertices slide at different speeds in different directions."""
-    corners = np.asarray(model.corners)
-    face = list(model.face_points[0])
-    normal = np.asarray(model.normals[0])
-    axis = np.cross(normal, [0.0, 0.0, -1.0])
-    axis = axis / np.linalg.norm(axis)
-    base = jaxrb.axis_angle_to_quat(jnp.asarray(axis), np.arccos(np.clip(-normal[2], -1, 1)))
-    world = corners @ np.asarray(jaxrb.quat_to_matrix(base)).T
-    height = -np.min(world[:, 2])
-    centre = world[face].mean(axis=0) * np.array([1.0, 1.0, 0.0])
-    circumradius = np.max(np.linalg.norm(world[face] - world[face].mean(axis=0), axis=1))
-    k = jax.random.split(key, 4)
-    yaw = jax.random.uniform(k[0], (n,), maxval=2 * np.pi)
-    angle = jax.random.uniform(k[1], (n,), maxval=2 * np.pi)
-    distance = circumradius * jnp.sqrt(jax.random.uniform(k[2], (n,)))
-    turn_way = jnp.where(jnp.arange(n) % 2 == 0, 1.0, -1.0)
-    spin = jax.random.uniform(k[3], (n,), minval=1.0, maxval=6.0) * turn_way
-    up = jnp.array([0.0, 0.0, 1.0])
-
-    def place(yaw, angle, distance, spin):
-        turn = jaxrb.axis_angle_to_quat(up, yaw)
-        q = jaxrb.quat_multiply(turn, base)
-        offset = distance * jnp.array([jnp.cos(angle), jnp.sin(angle), 0.0])
-        pivot = jaxrb.quat_to_matrix(turn) @ (centre + offset)  # from the mass centre
-        w = spin * up
-        omega = jaxrb.quat_to_matrix(q).T @ w
-        return jaxrb.State(jnp.array([0.0, 0.0, height]), q, jnp.cross(w, -pivot), omega)
-
-    return jax.vmap(place)(yaw, angle, distance, spin)
-
-
 def _vertex_problem(scene, state, vertices):
     """The normal rows of `vertices` (body-frame offsets from the mass centre (K, 3)) of a
     body on the floor (normal +z), each vertex with its own Coulomb friction along its own
@@ -293,7 +260,7 @@ def test_a_face_that_cannot_slide_flat_on_its_limit_surface_slides_on_three_vert
     three, f >= 0; to 1e-9 of the weight), and the face's other two vertices stay on the
     floor (zero normal acceleration, no force)."""
     model = contact_model(CHOICE_SHAPES[1])
-    states = _flat_turning_states(model, jax.random.key(5), 48)
+    states = flat_turning_states(model, jax.random.key(5), 48)
     friction = jax.random.uniform(jax.random.key(6), (48,), minval=0.75, maxval=0.95)
     chosen, consistent, _, _, resting = _choices(1, states, friction)
     assert np.all(np.asarray(resting) == 5)  # the whole pentagon touches

@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from programs import persistent
+from turning_states import flat_turning_states
 
 import jaxrb
 from jaxrb import dice
@@ -213,48 +214,38 @@ def test_candidate_lists_hold_every_mode_that_can_apply():
 
 
 THROWS = 3
+PIVOTING = (1, 8, 12)  # of the 48 turning states below: see its test
 
 
 @persistent
-def _throw_d12(omegas, quats, vels):
+def _throw_d12(states0, friction):
+    """d12s (edge 9 mm, 5 g; restitution 0.5, friction `friction`) from `states0`, 1.5 s."""
     die = dice.d12()
-    scene = jaxrb.Scene(
-        jaxrb.RigidBody(0.005, shape=die.shape),
-        forces=(jaxrb.Gravity(),),
-        floor=jaxrb.Floor(0.5, 0.3),
-    )
     ts = jnp.linspace(0.0, 1.5, 151)
 
-    def run(omega, quat, vel):
-        state0 = jaxrb.make_state(pos=(0.0, 0.0, 0.1), quat=quat, vel=vel, omega=omega)
+    def run(state0, mu):
+        scene = jaxrb.Scene(
+            jaxrb.RigidBody(0.005, shape=die.shape),
+            forces=(jaxrb.Gravity(),),
+            floor=jaxrb.Floor(0.5, mu),
+        )
         return jaxrb.simulate(scene, state0, ts, throw=False, max_impacts=160)
 
-    return jax.vmap(run)(omegas, quats, vels)
+    return jax.vmap(run)(states0, friction)
 
 
-def test_thrown_d12_settles_on_a_face(getkey):
-    """A d12 (pentagonal faces, 20 corners) thrown at random: never below the floor (1e-9 m),
-    energy never rises beyond the tolerances, at rest at the end on a face, by the dynamics
-    alone (the benchmark `contact_throws --shapes d4,d8,d12,d20` throws hundreds)."""
-    die = dice.d12()
-    scene = jaxrb.Scene(
-        jaxrb.RigidBody(0.005, shape=die.shape),
-        forces=(jaxrb.Gravity(),),
-        floor=jaxrb.Floor(0.5, 0.3),
-    )
-    omegas = jax.random.normal(getkey(), (THROWS, 3)) * 15.0
-    quats = jaxrb.quat_normalize(jax.random.normal(getkey(), (THROWS, 4)))
-    vels = jax.random.normal(getkey(), (THROWS, 3)) * 0.5
-    batch = _throw_d12(omegas, quats, vels)
+def _assert_at_rest_on_a_face(die, batch, mass):
+    """Every throw of `batch` successful, never below the floor (1e-9 m), its energy never
+    rising beyond the tolerances, and at rest at the end on a face."""
     assert np.all(np.asarray(batch.result._value) == jaxrb.RESULTS.successful._value)
-    assert np.all(np.asarray(batch.impacts.count) > 3)
     log = batch.contact
-    lift = float(scene.body.mass) * 9.81 * 1e-9  # m g contact_tol (docs/contact.md)
+    lift = mass * 9.81 * 1e-9  # m g contact_tol (docs/contact.md)
     assert np.all(np.asarray(log.max_energy_rise) <= lift)
     assert np.all(np.asarray(log.max_penetration) < 1e-9)
     dist = jax.vmap(jax.vmap(die.shape.floor_distance))(batch.states.pos, batch.states.quat)
     assert float(jnp.min(dist)) > -1e-9
-    energy = np.asarray(jax.vmap(lambda s: jaxrb.energy(scene, s))(batch.states))
+    scene = jaxrb.Scene(jaxrb.RigidBody(mass, shape=die.shape), forces=(jaxrb.Gravity(),))
+    energy = np.asarray(jax.vmap(jax.vmap(lambda s: jaxrb.energy(scene, s)))(batch.states))
     assert np.max(np.diff(energy, axis=1)) < 1e-9 * np.max(energy)
     assert np.all(np.asarray(log.kind[:, -1]) == jaxrb.contact.KIND_NAMES.index("face"))
     assert np.max(np.abs(np.asarray(batch.states.vel[:, -1]))) < 1e-8
@@ -266,6 +257,39 @@ def test_thrown_d12_settles_on_a_face(getkey):
         for n, f in zip(die.shape.face_normals(), die.shape.faces, strict=True)
     )
     np.testing.assert_allclose(np.asarray(batch.states.pos[:, -1, 2]), inradius, atol=1e-9)
+
+
+def test_thrown_d12_settles_on_a_face(getkey):
+    """A d12 (pentagonal faces, 20 corners) thrown at random: never below the floor (1e-9 m),
+    energy never rises beyond the tolerances, at rest at the end on a face, by the dynamics
+    alone (the benchmark `contact_throws --shapes d4,d8,d12,d20` throws hundreds)."""
+    omegas = jax.random.normal(getkey(), (THROWS, 3)) * 15.0
+    quats = jaxrb.quat_normalize(jax.random.normal(getkey(), (THROWS, 4)))
+    vels = jax.random.normal(getkey(), (THROWS, 3)) * 0.5
+    states0 = jax.vmap(
+        lambda q, v, w: jaxrb.make_state(pos=(0.0, 0.0, 0.1), quat=q, vel=v, omega=w)
+    )(quats, vels, omegas)
+    batch = _throw_d12(states0, jnp.full(THROWS, 0.3))
+    assert np.all(np.asarray(batch.impacts.count) > 3)
+    _assert_at_rest_on_a_face(dice.d12(), batch, 0.005)
+
+
+def test_d12_turning_flat_with_high_friction_comes_to_rest():
+    """Three d12s lying flat on a face and turning (1-6 rad/s) with friction 0.75-0.95: the
+    face tips onto an edge and hops, and comes down slipping slowly about a vertex at rest,
+    a state no mode of the engine fits (a face pivoting about a vertex is not modelled). A
+    pair of that face then has a normal problem that is not a P-matrix, but the face's
+    other vertices would sink in that mode: not the Painlevé paradox, and each die comes to
+    rest on a face (they are 3 of 48 such states, the only ones that stopped with
+    `RESULTS.painleve_paradox` before the paradox required the resting points a mode does
+    not hold to stay clear of the floor)."""
+    die = dice.d12()
+    states = flat_turning_states(contact_model(die.shape), jax.random.key(5), 48)
+    friction = jax.random.uniform(jax.random.key(6), (48,), minval=0.75, maxval=0.95)
+    which = np.array(PIVOTING)
+    batch = _throw_d12(jax.tree.map(lambda x: x[which], states), friction[which])
+    assert np.all(np.asarray(batch.contact.inconsistent) >= 1)  # the pivoting states
+    _assert_at_rest_on_a_face(die, batch, 0.005)
 
 
 def test_unknown_shape_in_a_floor_scene_is_an_error():

@@ -360,11 +360,14 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
     )
     still = still & ~(support & jnp.any(zero_slip[jnp.where(support, mode.support, 0)]))
     # the Painlevé paradox: a contact that slides (not from rest) on a normal problem that
-    # is not a P-matrix
+    # is not a P-matrix, while every resting point the mode does not hold stays clear of the
+    # floor (where one would not, the mode is not the body's contact whatever its own normal
+    # problem: a pair of a face that lies flat, say)
     slides = ((mode.kind == POINT) | (mode.kind == PAIR)) & (
         (~mode.stick[0] & ~rest_a) | ((mode.kind == PAIR) & ~mode.stick[1] & ~rest_b)
     )
-    paradox = slides & not_p_matrix(sol, mode, scene.body)
+    clear = jnp.all(gap_margin >= -tol.force)
+    paradox = slides & clear & not_p_matrix(sol, mode, scene.body)
     return chosen, jnp.concatenate([gap_margin, force, align]), still, paradox
 
 

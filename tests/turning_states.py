@@ -1,0 +1,43 @@
+"""States of a d12 lying flat on a face and turning about the vertical: the tests of a face
+that slides on three of its vertices (`Mode.support`), and of such a face at high friction
+coming down pivoting about a vertex."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import jaxrb
+
+
+def flat_turning_states(model, key, n):
+    """`n` states of the d12 of `model` lying flat on its first face and turning about the
+    vertical at 1-6 rad/s (either way), about a random point within the face's
+    circumcircle: its vertices slide at different speeds in different directions."""
+    corners = np.asarray(model.corners)
+    face = list(model.face_points[0])
+    normal = np.asarray(model.normals[0])
+    axis = np.cross(normal, [0.0, 0.0, -1.0])
+    axis = axis / np.linalg.norm(axis)
+    base = jaxrb.axis_angle_to_quat(jnp.asarray(axis), np.arccos(np.clip(-normal[2], -1, 1)))
+    world = corners @ np.asarray(jaxrb.quat_to_matrix(base)).T
+    height = -np.min(world[:, 2])
+    centre = world[face].mean(axis=0) * np.array([1.0, 1.0, 0.0])
+    circumradius = np.max(np.linalg.norm(world[face] - world[face].mean(axis=0), axis=1))
+    k = jax.random.split(key, 4)
+    yaw = jax.random.uniform(k[0], (n,), maxval=2 * np.pi)
+    angle = jax.random.uniform(k[1], (n,), maxval=2 * np.pi)
+    distance = circumradius * jnp.sqrt(jax.random.uniform(k[2], (n,)))
+    turn_way = jnp.where(jnp.arange(n) % 2 == 0, 1.0, -1.0)
+    spin = jax.random.uniform(k[3], (n,), minval=1.0, maxval=6.0) * turn_way
+    up = jnp.array([0.0, 0.0, 1.0])
+
+    def place(yaw, angle, distance, spin):
+        turn = jaxrb.axis_angle_to_quat(up, yaw)
+        q = jaxrb.quat_multiply(turn, base)
+        offset = distance * jnp.array([jnp.cos(angle), jnp.sin(angle), 0.0])
+        pivot = jaxrb.quat_to_matrix(turn) @ (centre + offset)  # from the mass centre
+        w = spin * up
+        omega = jaxrb.quat_to_matrix(q).T @ w
+        return jaxrb.State(jnp.array([0.0, 0.0, height]), q, jnp.cross(w, -pivot), omega)
+
+    return jax.vmap(place)(yaw, angle, distance, spin)
