@@ -288,7 +288,12 @@ def test_d12_turning_flat_with_high_friction_comes_to_rest():
     friction = jax.random.uniform(jax.random.key(6), (48,), minval=0.75, maxval=0.95)
     which = np.array(PIVOTING)
     batch = _throw_d12(jax.tree.map(lambda x: x[which], states), friction[which])
-    assert np.all(np.asarray(batch.contact.inconsistent) >= 1)  # the pivoting states
+    log = batch.contact
+    assert np.all(np.asarray(log.inconsistent) >= 1)  # the pivoting states
+    # each such event is marked in the event log, at an event's time
+    marked = np.asarray(log.event_inconsistent)
+    np.testing.assert_array_equal(marked.sum(axis=1), np.asarray(log.inconsistent))
+    assert np.all(np.isfinite(np.asarray(log.event_time)[marked]))
     _assert_at_rest_on_a_face(die, batch, 0.005)
 
 

@@ -191,6 +191,7 @@ class ContactProgram(eqx.Module):
             event_cause=jnp.zeros(options.max_events + 1, jnp.int32),
             event_kind=jnp.zeros(options.max_events + 1, jnp.int32),
             event_sliding=jnp.zeros(options.max_events + 1, bool),
+            event_inconsistent=jnp.zeros(options.max_events + 1, bool),
         )
         return dict(
             ts=ts,
@@ -259,6 +260,7 @@ class ContactProgram(eqx.Module):
         put("event_cause", cause_of(carry["trigger"], model))
         put("event_kind", out.mode.kind)
         put("event_sliding", _sliding(out.mode))
+        put("event_inconsistent", out.inconsistent)
         # the Painlevé paradox: no contact force exists; the run stops at the state reached
         paradox = do & out.painleve
         moves_on = do & ~paradox

@@ -88,6 +88,8 @@ class ContactLog(eqx.Module):
     - `event_time`: (max_events,) the time (s) of each event, `inf` in unused slots.
     - `event_cause`: (max_events,) what ended the segment before it (`CAUSES`).
     - `event_kind`, `event_sliding`: (max_events,) the mode after it.
+    - `event_inconsistent`: (max_events,) whether it is one of those counted in
+      `inconsistent` (no candidate mode, or no impulse, met every condition).
     """
 
     events: jax.Array
@@ -103,6 +105,7 @@ class ContactLog(eqx.Module):
     event_cause: jax.Array
     event_kind: jax.Array
     event_sliding: jax.Array
+    event_inconsistent: jax.Array
 
 
 CAUSES = ("start", "touch", "flat", "lift-off", "slip starts", "slip stops", "tip", "junction")
