@@ -98,13 +98,16 @@ def slowest_support_vertex(geom, mode) -> jax.Array:
 def mode_slips(sol: Solution, mode):
     """The slips whose end the slip conditions watch (m/s, world; (2, 3)): at slot a a
     point's slip or a face's slip twist (a support: its slowest vertex's slip), at slot b
-    the pair's second point's; and whether each slides in `mode` (2,)."""
+    the pair's second point's; whether each slides in `mode` (2,); and the points whose
+    slips they are (2,; slot a's is unused where it watches a face's twist)."""
     kind, geom = mode.kind, sol.geom
     on_face = (kind == FACE) & ~on_support(mode)
     holds = (kind == POINT) | (kind == PAIR) | (kind == FACE)
-    slip_a = geom.slip[slowest_support_vertex(geom, mode)]
-    slips = jnp.stack([jnp.where(on_face, sol.rows.twist, slip_a), geom.slip[mode.b]])
-    return slips, jnp.stack([holds & ~mode.stick[0], (kind == PAIR) & ~mode.stick[1]])
+    points = jnp.stack([slowest_support_vertex(geom, mode), mode.b])
+    slips = geom.slip[points]
+    slips = slips.at[0].set(jnp.where(on_face, sol.rows.twist, slips[0]))
+    sliding = jnp.stack([holds & ~mode.stick[0], (kind == PAIR) & ~mode.stick[1]])
+    return slips, sliding, points
 
 
 def conditions(sol: Solution, mode, model, scene, tol) -> jax.Array:
@@ -120,7 +123,7 @@ def conditions(sol: Solution, mode, model, scene, tol) -> jax.Array:
     # along the direction it started in, has passed zero (by half the blend speed, where
     # friction still opposes that direction); any other when its speed has fallen to the
     # stop speed (a slip that only turns, as a coin's on its rim, does not end it)
-    slips, sliding = mode_slips(sol, mode)
+    slips, sliding, _ = mode_slips(sol, mode)
     dir_a = jnp.where(mode.kind == FACE, mode.twist_dir, mode.slide_dir[0])
 
     def slip_condition(slip, direction, from_rest):

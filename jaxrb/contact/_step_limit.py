@@ -33,7 +33,7 @@ import diffrax as dfx
 import jax
 import jax.numpy as jnp
 
-from ._events import mode_slips, slowest_support_vertex
+from ._events import mode_slips
 from ._modes import FACE, FLIGHT, active_points, no_derivative, on_support
 from ._step_end import LIMIT
 
@@ -81,13 +81,11 @@ def slip_step_limit(sol, mode, model, tol) -> jax.Array:
     steps could step over."""
     geom = sol.geom
     dtype = geom.gap.dtype
-    slips, sliding = mode_slips(sol, mode)
+    slips, sliding, points = mode_slips(sol, mode)
     slides = sliding & ~mode.from_rest
-    accelerations = geom.tangential(sol.point_accelerations())
+    rates = geom.tangential(sol.point_accelerations())[points]
     on_face = (mode.kind == FACE) & ~on_support(mode)
-    slowest = accelerations[slowest_support_vertex(geom, mode)]  # point a unless a support
-    rate_a = jnp.where(on_face, sol.twist_rate(model, mode.face), slowest)
-    rates = jnp.stack([rate_a, accelerations[mode.b]])
+    rates = rates.at[0].set(jnp.where(on_face, sol.twist_rate(model, mode.face), rates[0]))
     speed = jnp.linalg.norm(slips, axis=-1)
     change = jnp.linalg.norm(rates, axis=-1) + jnp.finfo(dtype).tiny
     room = jnp.maximum(SLIP_SHRINK * (speed - 0.5 * tol.slip_stop), 0.5 * tol.slip_stop)
