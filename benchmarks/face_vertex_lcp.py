@@ -50,26 +50,30 @@ def state_at(kind, n, seed, index, t):
     return scene, jax.tree.map(lambda x: np.asarray(x[-1]), tr.states), int(tr.contact.kind[-1])
 
 
-def vertex_problem(scene, state, points):
-    """(A, b, slips) of the vertices `points` (indices into the shape's vertices), world
-    frame, floor normal +z."""
+def vertex_problem(scene, state, vertices):
+    """(A, b, slips) of `vertices` (body-frame offsets from the mass centre (K, 3), m) of a
+    body on the floor (normal +z), each vertex with its own Coulomb friction along its own
+    slip: a = A f + b, a the vertices' normal accelerations (m/s^2), f their normal forces
+    (N); A = J M^-1 C^T with J_i = (n, r_i x n), C_i = (n - mu s_i, r_i x (n - mu s_i)), b the
+    accelerations without contact force (gravity, the gyroscopic and centripetal terms; the
+    drag of the mass centre is horizontal here); slips (K, 3) world (m/s)."""
     body, mu = scene.body, float(scene.floor.friction)
     R = np.asarray(jaxrb.quat_to_matrix(jnp.asarray(state.quat)))
     inertia = R @ np.asarray(body.inertia_matrix) @ R.T
-    w = R @ state.omega
-    r = np.asarray(body.shape.vertices)[points] @ R.T
+    w = R @ np.asarray(state.omega)
+    r = np.asarray(vertices) @ R.T
     n = np.array([0.0, 0.0, 1.0])
-    vel = state.vel + np.cross(w, r)
+    vel = np.asarray(state.vel) + np.cross(w, r)
     slip = vel - np.outer(vel @ n, n)
     s_hat = slip / np.linalg.norm(slip, axis=1, keepdims=True)
     w_dot = np.linalg.solve(inertia, -np.cross(w, inertia @ w))  # without contact forces
     m_inv = np.zeros((6, 6))
     m_inv[:3, :3] = np.eye(3) / float(body.mass)
     m_inv[3:, 3:] = np.linalg.inv(inertia)
-    J = np.array([np.concatenate([n, np.cross(ri, n)]) for ri in r])
+    J = np.concatenate([np.broadcast_to(n, r.shape), np.cross(r, n)], axis=1)
     force = n - mu * s_hat
     C = np.concatenate([force, np.cross(r, force)], axis=1)
-    b = -G + np.array([n @ (np.cross(w_dot, ri) + np.cross(w, np.cross(w, ri))) for ri in r])
+    b = -G + (np.cross(w_dot, r) + np.cross(w, np.cross(w, r))) @ n
     return J @ m_inv @ C.T, b, slip
 
 
@@ -108,7 +112,7 @@ def main(argv=None):
     heights = state.pos[2] + np.asarray(body.shape.vertices) @ R.T[:, 2]
     face = max(body.shape.faces, key=lambda f: -max(heights[list(f)]))
     points = list(face)
-    A, b, slip = vertex_problem(scene, state, points)
+    A, b, slip = vertex_problem(scene, state, np.asarray(body.shape.vertices)[points])
     print(f"{a.kind} throw {a.index} at t = {a.t} s: engine's mode kind {mode_kind}")
     print(f"friction {float(scene.floor.friction):.4f}; face vertices {points}")
     print("heights (m):", np.array2string(heights[points], precision=3))

@@ -9,6 +9,7 @@ from programs import persistent
 from turning_states import flat_turning_states
 
 import jaxrb
+from benchmarks.face_vertex_lcp import vertex_problem
 from jaxrb.contact._features import contact_model
 from jaxrb.contact._modes import (
     FACE,
@@ -206,32 +207,6 @@ def test_mode_choice_equals_testing_every_mode():
 # ------------------------------------- a face that slides on three of its vertices (a support)
 
 
-def _vertex_problem(scene, state, vertices):
-    """The normal rows of `vertices` (body-frame offsets from the mass centre (K, 3)) of a
-    body on the floor (normal +z), each vertex with its own Coulomb friction along its own
-    slip: a = A f + b, a the vertices' normal accelerations, f their normal forces (N);
-    A = J M^-1 C^T with J_i = (n, r_i x n), C_i = (n - mu s_i, r_i x (n - mu s_i)), and b
-    the accelerations without contact force (gravity, the centripetal terms; the drag of
-    the mass centre is horizontal here)."""
-    body, mu = scene.body, float(scene.floor.friction)
-    R = np.asarray(jaxrb.quat_to_matrix(jnp.asarray(state.quat)))
-    inertia = R @ np.asarray(body.inertia_matrix) @ R.T
-    w = R @ np.asarray(state.omega)
-    r = vertices @ R.T
-    n = np.array([0.0, 0.0, 1.0])
-    slip = np.asarray(state.vel) + np.cross(w, r)
-    slip = slip - np.outer(slip @ n, n)
-    force = n - mu * slip / np.linalg.norm(slip, axis=1, keepdims=True)
-    m_inv = np.zeros((6, 6))
-    m_inv[:3, :3] = np.eye(3) / float(body.mass)
-    m_inv[3:, 3:] = np.linalg.inv(inertia)
-    J = np.concatenate([np.broadcast_to(n, r.shape), np.cross(r, n)], axis=1)
-    C = np.concatenate([force, np.cross(r, force)], axis=1)
-    w_dot = np.linalg.solve(inertia, -np.cross(w, inertia @ w))
-    b = -9.81 + (np.cross(w_dot, r) + np.cross(w, np.cross(w, r))) @ n
-    return J @ m_inv @ C.T, b
-
-
 @persistent
 def _support_forces(states, friction, support):
     """The normal forces (N) of the `support` vertices (n, 3) of a d12's first face in the
@@ -276,7 +251,7 @@ def test_a_face_that_cannot_slide_flat_on_its_limit_surface_slides_on_three_vert
         state = jax.tree.map(lambda x, m=m: np.asarray(x[m]), states)
         scene = _scene(CHOICE_SHAPES[1], float(friction[m]))
         support = list(np.asarray(chosen.support[m]))
-        A, b = _vertex_problem(scene, state, corners[face])
+        A, b, _ = vertex_problem(scene, state, corners[face])
         on = [face.index(p) for p in support]
         f = np.linalg.solve(A[np.ix_(on, on)], -b[on])
         assert np.all(f >= -1e-9 * weight)

@@ -95,13 +95,19 @@ def slowest_support_vertex(geom, mode) -> jax.Array:
     return vertices[jnp.argmin(_safe_norm(geom.slip[vertices]))]
 
 
+def slips_as_twist(mode) -> jax.Array:
+    """Whether the slip that `mode_slips` watches at slot a is the face's slip twist (a
+    face on its limit surface, or sticking) rather than a point's slip."""
+    return (mode.kind == FACE) & ~on_support(mode)
+
+
 def mode_slips(sol: Solution, mode):
     """The slips whose end the slip conditions watch (m/s, world; (2, 3)): at slot a a
     point's slip or a face's slip twist (a support: its slowest vertex's slip), at slot b
     the pair's second point's; whether each slides in `mode` (2,); and the points whose
     slips they are (2,; slot a's is unused where it watches a face's twist)."""
     kind, geom = mode.kind, sol.geom
-    on_face = (kind == FACE) & ~on_support(mode)
+    on_face = slips_as_twist(mode)
     holds = (kind == POINT) | (kind == PAIR) | (kind == FACE)
     points = jnp.stack([slowest_support_vertex(geom, mode), mode.b])
     slips = geom.slip[points]

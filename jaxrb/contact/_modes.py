@@ -78,6 +78,17 @@ class Mode(eqx.Module):
     support: jax.Array
 
 
+def face_supports(points) -> list[tuple[int, int, int]]:
+    """The supports (`Mode.support`) of a face whose points are `points`: every set of three
+    of them (point indices, ascending), none for a face of fewer than three points."""
+    return list(itertools.combinations(sorted(points), 3))
+
+
+def has_supports(model) -> bool:
+    """Whether any face of the shape can slide on a support (static)."""
+    return any(face_supports(points) for points in model.face_points)
+
+
 def on_support(mode: Mode) -> jax.Array:
     """Whether `mode` is a face sliding on three of its vertices, each with its own friction
     (a support's mode made to stick is the face sticking)."""
@@ -125,7 +136,7 @@ class CandidateTable:
             for stick in (True, False):
                 held = pts if stick else ()
                 rows.append((FACE, pts[0], pts[0], f, stick, False, pts, held, none))
-            for support in itertools.combinations(sorted(pts), 3):
+            for support in face_supports(pts):
                 rows.append((FACE, pts[0], pts[0], f, False, False, pts, (), support))
         smooth = model.smooth_points  # these slide only
         for a, b in model.pairs:
@@ -441,7 +452,7 @@ def _with_face_rows(state, geom, mode, hat_f, mu, scene, model, point_rows, supp
     # d/dt (nu_w . t2) = w . t1 and d/dt (-nu_w . t1) = w . t2 near nu_w = -n
     f_pos = jnp.stack([centre_gap, dot(nu_w, t2), -dot(nu_w, t1), zero, zero, zero])
     # sliding: the limit surface about the centre, or each support vertex's own friction
-    if supports and max(len(f) for f in model.face_points) >= 3:  # a shape with supports
+    if supports and has_supports(model):
         support = on_support(mode)
         support_map, v_force, v_couple = only_where_needed(
             support,

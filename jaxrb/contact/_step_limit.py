@@ -33,8 +33,8 @@ import diffrax as dfx
 import jax
 import jax.numpy as jnp
 
-from ._events import mode_slips
-from ._modes import FACE, FLIGHT, active_points, no_derivative, on_support
+from ._events import mode_slips, slips_as_twist
+from ._modes import FLIGHT, active_points, no_derivative
 from ._step_end import LIMIT
 
 GAP_SHRINK = 0.8  # k: the fraction of a gap a step may close
@@ -84,7 +84,7 @@ def slip_step_limit(sol, mode, model, tol) -> jax.Array:
     slips, sliding, points = mode_slips(sol, mode)
     slides = sliding & ~mode.from_rest
     rates = geom.tangential(sol.point_accelerations())[points]
-    on_face = (mode.kind == FACE) & ~on_support(mode)
+    on_face = slips_as_twist(mode)
     rates = rates.at[0].set(jnp.where(on_face, sol.twist_rate(model, mode.face), rates[0]))
     speed = jnp.linalg.norm(slips, axis=-1)
     change = jnp.linalg.norm(rates, axis=-1) + jnp.finfo(dtype).tiny
