@@ -132,6 +132,17 @@ def point_sliding_direction(b, K, mu, n, t1, t2):
     return scan_direction(measure, n, t1, t2, b.dtype)
 
 
+def relative_accelerations(acc, geom, beta):
+    """Point accelerations `acc` (P, 3, world, m/s^2) taken relative to the targets that the
+    stabilisation (rate `beta`, 1/s) sets a held contact: the normal part plus 2 beta g' +
+    beta^2 g, the slip's part plus beta s (gap g, gap rate g', slip s of each point). A mode's
+    forces make these zero on the rows it holds, so its successors' conditions, tested on
+    them, hold exactly where its own forces reach their bounds (docs/contact.md, section 3);
+    on the constraint manifold (g = g' = 0, no slip) they are the accelerations themselves."""
+    drift = 2 * beta * geom.gap_rate + beta**2 * geom.gap
+    return acc + drift[:, None] * geom.n + beta * geom.slip
+
+
 class Choice(eqx.Module):
     """The chosen mode, whether it satisfied every condition, and whether the sliding
     contact problem had no solution (`painleve`) or several (`ambiguous`): the Painlevé
@@ -168,6 +179,7 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
     skipped)."""
     dtype = state.pos.dtype
     zero3 = jnp.zeros(3, dtype)
+    beta = jnp.asarray(tol.stabilisation, dtype)
     twist, _ = face_twist(state, geom, model, mode.face)
     slides_a = ((mode.kind == POINT) | (mode.kind == PAIR)) & ~mode.stick[0]
     rest_a = slides_a & zero_slip[mode.a]
@@ -178,6 +190,7 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
 
     # the mode's solution for any sliding directions, at the cost of a 2 x 2 solve each
     solve = sliding_solver(t, state, mode, scene, model, tol, geom)
+    relative = lambda sol: relative_accelerations(sol.point_accelerations(), geom, beta)  # noqa: E731
 
     # sliding from rest starts opposite to the friction that sticking would need (exactly so
     # at the cone's boundary, where the slip's acceleration vanishes)
@@ -203,9 +216,12 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
     Jp = rows.J[keep]
     Kp = Jp @ inverse_mass_columns(scene.body, geom.R, Jp).T
     frame = jnp.stack(geom.frame_of(mode.a))
-    # the point's acceleration without contact force: J u' - K lambda, plus the rows' bias
+    # the point's acceleration without contact force: J u' - K lambda, plus the rows' bias,
+    # relative to the stabilisation's targets (`relative_accelerations`)
     u_dot = jnp.concatenate([held.acc, held.alpha])
     bp = frame.T @ (Jp @ u_dot - Kp @ lam[keep] + rows.bias[keep])
+    drift_a = 2 * beta * geom.gap_rate[mode.a] + beta**2 * geom.gap[mode.a]
+    bp = bp + drift_a * frame[0] + beta * geom.slip[mode.a]
     mu, _, _ = point_coefficients(scene, model)
     point_dir, found = only_where_needed(
         live & (mode.kind == POINT) & rest_a,
@@ -228,7 +244,7 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
     def end_measure(end, s):
         hats = (jnp.where(end == 0, s, hats0[0]), jnp.where(end == 0, hats0[1], s), hats0[2])
         sol = solve(hats)
-        acc = geom.tangential(sol.point_accelerations())
+        acc = geom.tangential(relative(sol))
         return acc[jnp.where(end == 0, mode.a, mode.b)], (sol.lam[0] >= 0) & (sol.lam[1] >= 0)
 
     end = jnp.where(scan_b, 1, 0)
@@ -277,7 +293,7 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
     def pair_measure(x):
         sa, sb = on_floor(x[0], ends[0]), on_floor(x[1], ends[1])
         sol = solve((sa, sb, hats0[2]))
-        acc = geom.tangential(sol.point_accelerations())
+        acc = geom.tangential(relative(sol))
         aa, ab = acc[mode.a], acc[mode.b]
         turning = jnp.stack([cross(aa, sa) @ ends[0][0], cross(ab, sb) @ ends[1][0]])
         return turning, jnp.stack([aa @ sa, ab @ sb]), (sol.lam[0] >= 0) & (sol.lam[1] >= 0)
@@ -295,9 +311,10 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
     )
     small = 1e-6 * (1.0 + _safe_norm(held.acc))  # slip accelerations below this: keep the seed
 
-    def slip_rates(sol):
-        slip_acc = geom.tangential(sol.point_accelerations())
-        return slip_acc[mode.a], slip_acc[mode.b], sol.twist_rate(model, mode.face)
+    def slip_rates(sol):  # relative to the stabilisation's targets, as every condition
+        slip_acc = geom.tangential(relative(sol))
+        twist_rate = sol.twist_rate(model, mode.face) + beta * twist
+        return slip_acc[mode.a], slip_acc[mode.b], twist_rate
 
     def follow(rest, rate, hat):  # a single point's direction is exact already
         iterate = rest & (mode.kind != POINT) & (_safe_norm(rate) > small)
@@ -329,7 +346,7 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
     force = conditions(sol, mode, model, scene, tol)[P:]
     keep = jnp.array([True] * 5 + [False, False, True, False])  # not the slips, junction
     force = jnp.where(keep, force, UNUSED)
-    gap_acc = jnp.sum(sol.point_accelerations() * geom.n, axis=-1)
+    gap_acc = jnp.sum(relative(sol) * geom.n, axis=-1)
     gap_margin = jnp.where(resting & ~active_points(model, mode), gap_acc, UNUSED)
     # sliding from rest: the slip must accelerate along the direction friction opposes
     sa, sb, st = slip_rates(sol)
