@@ -14,8 +14,10 @@ from benchmarks.face_vertex_lcp import vertex_problem
 from jaxrb.contact._features import contact_model
 from jaxrb.contact._modes import (
     FACE,
+    PAIR,
     POINT,
     CandidateTable,
+    face_twist,
     flight_mode,
     geometry,
     sliding_solver,
@@ -145,6 +147,65 @@ def test_a_held_points_accelerations_relative_to_the_stabilisation_are_zero():
         np.testing.assert_array_less(np.abs(normal), 1e-12 * scale)
         np.testing.assert_array_less(tangential[stick], 1e-12 * scale[stick])
         assert np.all(drift > 1.0)  # far from the constraints: the targets are not zero
+
+
+@persistent
+def _held_pairs_and_faces(key_data):
+    """Every sticking pair and sticking face of `SHAPES[0]` (a box) at one random state off
+    the constraint manifold: a pair's ends' relative normal accelerations (2,) and end a's
+    relative slip acceleration, a face's relative twist rate (3,: the rate of (v . t1,
+    v . t2, rho w . n) at its centre plus beta times that twist), each with its scale."""
+    shape = SHAPES[0]
+    scene = _scene(shape)
+    model = contact_model(shape)
+    table = CandidateTable(model)
+    k1, k2 = jax.random.split(jax.random.wrap_key_data(key_data))
+    quat = jaxrb.quat_normalize(jax.random.normal(k1, (4,)))
+    state = jaxrb.make_state(
+        pos=(0.0, 0.0, 0.01), quat=quat, vel=jax.random.normal(k2, (3,)), omega=(3.0, -2.0, 5.0)
+    )
+    state = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), state)
+    beta = TOL.stabilisation
+    old = flight_mode(jnp.float64)
+    pairs = np.flatnonzero((table.kind == PAIR) & table.stick[:, 0] & table.stick[:, 1])
+    faces = np.flatnonzero((table.kind == FACE) & table.stick[:, 0])
+
+    def pair(i):
+        mode = table.mode(i, old)
+        geom = geometry(state, scene, model, mode.seed, mode.side)
+        sol = solve_mode(0.0, state, mode, scene, model, TOL, geom=geom)
+        acc = sol.point_accelerations()
+        rel = relative_accelerations(acc, geom, beta)
+        ends = jnp.stack([mode.a, mode.b])
+        normal = jnp.sum(rel[ends] * geom.n[ends], axis=-1)
+        slip_a = rel[mode.a] - normal[0] * geom.n[mode.a]
+        scale = 9.81 + jnp.max(jnp.linalg.norm(acc[ends], axis=-1))
+        return normal, jnp.linalg.norm(slip_a), scale
+
+    def face(i):
+        mode = table.mode(i, old)
+        geom = geometry(state, scene, model, mode.seed, mode.side)
+        sol = solve_mode(0.0, state, mode, scene, model, TOL, geom=geom)
+        twist, _ = face_twist(state, geom, model, mode.face)
+        rate = sol.twist_rate(model, mode.face)
+        return rate + beta * twist, 9.81 + jnp.linalg.norm(rate)
+
+    return jax.vmap(pair)(jnp.asarray(pairs)), jax.vmap(face)(jnp.asarray(faces))
+
+
+def test_a_held_pairs_and_faces_accelerations_relative_to_the_stabilisation_are_zero():
+    """As for points (above): a box's sticking pairs hold both ends' relative normal
+    accelerations and end a's relative slip acceleration at zero, and its sticking faces
+    their relative twist rate (the conditions of a face that starts to slide from rest
+    read it), to roundoff (1e-12 of their scale), at a state far from the constraints."""
+    (normal, slip_a, pair_scale), (twist, face_scale) = map(
+        lambda t: tuple(map(np.asarray, t)),
+        _held_pairs_and_faces(jax.random.key_data(jax.random.key(12))),
+    )
+    assert len(pair_scale) == 12 and len(face_scale) == 6
+    assert np.all(np.abs(normal) < 1e-12 * pair_scale[:, None]), normal
+    np.testing.assert_array_less(slip_a, 1e-12 * pair_scale)
+    assert np.all(np.abs(twist) < 1e-12 * face_scale[:, None]), twist
 
 
 @persistent
