@@ -41,6 +41,16 @@ SHAPES = (
 )
 
 
+def _moving_state(k1, k2):
+    """A state 1 cm up (float64), its attitude and velocity random from the keys, turning at
+    (3, -2, 5) rad/s: every contact point's gap, gap rate and slip far from zero."""
+    quat = jaxrb.quat_normalize(jax.random.normal(k1, (4,)))
+    state = jaxrb.make_state(
+        pos=(0.0, 0.0, 0.01), quat=quat, vel=jax.random.normal(k2, (3,)), omega=(3.0, -2.0, 5.0)
+    )
+    return jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), state)
+
+
 @persistent(static_argnames="which")
 def _compare(which, key_data):
     """Every candidate mode of `SHAPES[which]` at one moving state, with random unit sliding
@@ -52,11 +62,7 @@ def _compare(which, key_data):
     model = contact_model(shape)
     table = CandidateTable(model)
     k1, k2, k3 = jax.random.split(key, 3)
-    quat = jaxrb.quat_normalize(jax.random.normal(k1, (4,)))
-    state = jaxrb.make_state(
-        pos=(0.0, 0.0, 0.01), quat=quat, vel=jax.random.normal(k2, (3,)), omega=(3.0, -2.0, 5.0)
-    )
-    state = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), state)
+    state = _moving_state(k1, k2)
     hats = jax.random.normal(k3, (len(table), 3, 3))
     hats = hats / jnp.linalg.norm(hats, axis=-1, keepdims=True)
     old = flight_mode(jnp.float64)
@@ -104,12 +110,7 @@ def _held_point_accelerations(which, key_data):
     scene = _scene(shape)
     model = contact_model(shape)
     table = CandidateTable(model)
-    k1, k2 = jax.random.split(jax.random.wrap_key_data(key_data))
-    quat = jaxrb.quat_normalize(jax.random.normal(k1, (4,)))
-    state = jaxrb.make_state(
-        pos=(0.0, 0.0, 0.01), quat=quat, vel=jax.random.normal(k2, (3,)), omega=(3.0, -2.0, 5.0)
-    )
-    state = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), state)
+    state = _moving_state(*jax.random.split(jax.random.wrap_key_data(key_data)))
     points = np.flatnonzero(table.kind == POINT)
     old = flight_mode(jnp.float64)
 
@@ -159,12 +160,7 @@ def _held_pairs_and_faces(key_data):
     scene = _scene(shape)
     model = contact_model(shape)
     table = CandidateTable(model)
-    k1, k2 = jax.random.split(jax.random.wrap_key_data(key_data))
-    quat = jaxrb.quat_normalize(jax.random.normal(k1, (4,)))
-    state = jaxrb.make_state(
-        pos=(0.0, 0.0, 0.01), quat=quat, vel=jax.random.normal(k2, (3,)), omega=(3.0, -2.0, 5.0)
-    )
-    state = jax.tree.map(lambda x: jnp.asarray(x, jnp.float64), state)
+    state = _moving_state(*jax.random.split(jax.random.wrap_key_data(key_data)))
     beta = TOL.stabilisation
     old = flight_mode(jnp.float64)
     pairs = np.flatnonzero((table.kind == PAIR) & table.stick[:, 0] & table.stick[:, 1])
