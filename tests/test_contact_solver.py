@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from programs import persistent
-from turning_states import flat_turning_states
+from turning_states import first_face_down, flat_turning_states
 
 import jaxrb
 from benchmarks.contact_throws import throws
@@ -252,14 +252,8 @@ def _resting_states(model, key, n):
     corners in turn, with random slips and spins, every fourth without any slip (a slide
     would start from rest)."""
     corners = np.asarray(model.corners)
-    normal = np.asarray(model.normals[0])
     face = list(model.face_points[0])
-    # the attitude that turns the first face down
-    axis = np.cross(normal, [0.0, 0.0, -1.0])
-    angle = np.arccos(np.clip(-normal[2], -1.0, 1.0))
-    axis = axis / np.linalg.norm(axis) if np.linalg.norm(axis) > 1e-12 else np.array([1.0, 0, 0])
-    base = jaxrb.axis_angle_to_quat(jnp.asarray(axis), angle)
-    world = np.asarray(corners @ np.asarray(jaxrb.quat_to_matrix(base)).T)
+    base, world = first_face_down(model)
     a, b = next((a, b) for a, b in model.pairs if a in face and b in face)
     centre = world[face].mean(axis=0)
     # tilt axes (world, horizontal) that lift the face off all but the edge (a, b) or corner a

@@ -1,6 +1,7 @@
 """States of a d12 lying flat on a face and turning about the vertical: the tests of a face
 that slides on three of its vertices (`Mode.support`), and of such a face at high friction
-coming down pivoting about a vertex."""
+coming down pivoting about a vertex; and the attitude that turns a shape's first face
+down, which the mode choice's tests start from too."""
 
 import jax
 import jax.numpy as jnp
@@ -9,17 +10,24 @@ import numpy as np
 import jaxrb
 
 
+def first_face_down(model):
+    """The attitude (unit quaternion) that turns the first face of `model`'s shape down (its
+    outward normal to -z), and the shape's corners so turned (P, 3), from the mass centre
+    (m)."""
+    normal = np.asarray(model.normals[0])
+    axis = np.cross(normal, [0.0, 0.0, -1.0])
+    angle = np.arccos(np.clip(-normal[2], -1.0, 1.0))
+    axis = axis / np.linalg.norm(axis) if np.linalg.norm(axis) > 1e-12 else np.array([1.0, 0, 0])
+    base = jaxrb.axis_angle_to_quat(jnp.asarray(axis), angle)
+    return base, np.asarray(model.corners) @ np.asarray(jaxrb.quat_to_matrix(base)).T
+
+
 def flat_turning_states(model, key, n):
     """`n` states of the d12 of `model` lying flat on its first face and turning about the
     vertical at 1-6 rad/s (either way), about a random point within the face's
     circumcircle: its vertices slide at different speeds in different directions."""
-    corners = np.asarray(model.corners)
     face = list(model.face_points[0])
-    normal = np.asarray(model.normals[0])
-    axis = np.cross(normal, [0.0, 0.0, -1.0])
-    axis = axis / np.linalg.norm(axis)
-    base = jaxrb.axis_angle_to_quat(jnp.asarray(axis), np.arccos(np.clip(-normal[2], -1, 1)))
-    world = corners @ np.asarray(jaxrb.quat_to_matrix(base)).T
+    base, world = first_face_down(model)
     height = -np.min(world[:, 2])
     centre = world[face].mean(axis=0) * np.array([1.0, 1.0, 0.0])
     circumradius = np.max(np.linalg.norm(world[face] - world[face].mean(axis=0), axis=1))
