@@ -11,6 +11,7 @@ from turning_states import first_face_down, flat_turning_states
 import jaxrb
 from benchmarks.contact_throws import throws
 from benchmarks.face_vertex_lcp import vertex_problem
+from jaxrb.contact._events import SLIP_A, condition_tolerances, slide_end
 from jaxrb.contact._features import contact_model
 from jaxrb.contact._modes import (
     FACE,
@@ -239,6 +240,67 @@ def test_coins_lift_off_and_start_to_slip_with_a_consistent_mode():
     assert lift_off in causes[1] and lift_off in causes[2]
     np.testing.assert_array_equal(np.asarray(log.inconsistent), 0)
     assert not np.any(np.asarray(log.event_inconsistent))
+
+
+# ------------------------------------------------------------ the end of a slide from rest
+
+BLEND = TOL.slip_blend  # m/s
+# coin 84 of `contact_throws --n 300`, run with the mode choice of before its conditions were
+# taken relative to the stabilisation's targets and without this condition: a rim point's
+# slide from rest, 0.7047 s into the throw, whose slip stayed at 5e-7 m/s for 1e5 steps (its
+# slip along the start direction and across it, m/s)
+CREEP = (-4.886e-7, 2.084e-7)
+
+
+def _slips_from_rest(cases):
+    """Slips (m/s, world) of a slide that started from rest along x, from rows of (along x,
+    along y, whether from rest)."""
+    cases = np.asarray(cases, dtype=np.float64)
+    return jnp.asarray(np.column_stack([cases[:, :2], np.zeros(len(cases))])), cases[:, 2] > 0
+
+
+@jax.jit
+def _slide_ends(slips, from_rest):
+    direction = jnp.array([1.0, 0.0, 0.0])
+    return jax.vmap(lambda s, r: slide_end(s, direction, r, TOL))(slips, from_rest)
+
+
+def test_a_slide_from_rest_ends_when_its_slip_turns_back_or_friction_pushes_it_on():
+    """A slide from rest in direction s0 has friction opposing s_f = unit(s + blend s0). It
+    ends (its condition falls to zero) when the slip turns back past -blend/2 along s0, or
+    when friction pushes the slip on, s . s_f < -0.3 blend (as it held coin 84's slip near
+    zero for 1e5 steps, `CREEP`, where the turn-back condition still held). It goes on while
+    the slip grows along s0 or turns across it (friction's direction turning with it). Any
+    other slide ends at half the stop speed."""
+    goes_on = [
+        (0.0, 0.0, 1),  # the start
+        (0.1 * BLEND, 0.0, 1),
+        (BLEND, 0.0, 1),
+        (1e3 * BLEND, 0.0, 1),
+        (-0.2 * BLEND, 0.0, 1),  # turning back, not yet past -blend/2: s . s_f = -0.2 blend
+        (0.0, BLEND, 1),  # across s0: friction turns 45 degrees and opposes it in part
+        (0.0, 3.0 * BLEND, 1),  # a large slip turned by 90 degrees
+        (0.6 * TOL.slip_stop, 0.0, 0),  # not from rest: above half the stop speed
+    ]
+    ends = [
+        (-0.6 * BLEND, 0.0, 1),  # turned back
+        (-0.4 * BLEND, 0.1 * BLEND, 1),  # pushed on: s . s_f = -0.378 blend
+        (*CREEP, 1),  # s . s_f = -0.374 blend
+        (0.4 * TOL.slip_stop, 0.0, 0),  # not from rest: below half the stop speed
+    ]
+    values_on = np.asarray(_slide_ends(*_slips_from_rest(goes_on)))
+    values_end = np.asarray(_slide_ends(*_slips_from_rest(ends)))
+    assert np.all(values_on > 0), values_on
+    assert np.all(values_end < 0), values_end
+    # it starts above its tolerance (a quarter of the blend speed), so it is not shifted at
+    # the start (`start_offsets`) and fires as soon as it falls through zero
+    start = values_on[0]
+    model = contact_model(SHAPES[1])
+    tolerance = condition_tolerances(model, TOL, jnp.float64)[model.num_points + SLIP_A]
+    assert start > tolerance, (start, tolerance)
+    np.testing.assert_allclose(start, 0.3 * BLEND, rtol=1e-12)
+    # where friction pushes the slip on, the slip had not turned back past -blend/2 along s0
+    assert CREEP[0] + 0.5 * BLEND > 0 and -0.4 * BLEND + 0.5 * BLEND > 0
 
 
 # ------------------------------------------------- the mode choice against testing every mode

@@ -9,14 +9,15 @@ set to a large value; the event is the first zero of their minimum:
   friction margin at a (mu N - |f_t|; a face: its limit surface), at b, the margin of a
   sticking pair's force along its line; for a sliding point a (or face), b (m/s): its slip
   speed less half the stop speed `slip_stop`, or, for a slide that started from rest, its slip
-  along the direction it started in plus half the blend speed (they fire when the slip has
-  stopped or turned back; a slip that only turns, as a coin's on its rim, does not end a
-  segment; a face on a support of three vertices: the slowest vertex's slip speed less
-  half the stop speed); and a face's centre-of-pressure margin (m/s^2: N/m times the
-  distance inside its support region over its friction radius; on a support: the least of
-  its three vertices' normal forces); and on a curved surface whose curvature jumps (a
-  rounded cone's tip), the junction margin times the mode's `side` (it fires when the ball
-  passes to the other part, so that no step straddles the jump).
+  along the direction it started in plus half the blend speed, and the slip along the
+  direction friction opposes plus 0.3 blend speeds (`slide_end`: they fire when the slip has
+  stopped, turned back or is pushed on by friction; a slip that only turns, as a coin's on
+  its rim, does not end a segment; a face on a support of three vertices: the slowest
+  vertex's slip speed less half the stop speed); and a face's centre-of-pressure margin
+  (m/s^2: N/m times the distance inside its support region over its friction radius; on a
+  support: the least of its three vertices' normal forces); and on a curved surface whose
+  curvature jumps (a rounded cone's tip), the junction margin times the mode's `side` (it
+  fires when the ball passes to the other part, so that no step straddles the jump).
 
 Every condition must start positive: diffrax fires on a downward crossing only, so one that
 started at or below zero would disarm the whole event (impacts included). A condition that
@@ -35,12 +36,24 @@ import optimistix as optx
 
 from .._linalg import vecmat
 from .._quaternion import _safe_norm
-from ._modes import FACE, PAIR, POINT, Solution, active_points, on_support, point_coefficients
+from ._modes import (
+    FACE,
+    PAIR,
+    POINT,
+    Solution,
+    active_points,
+    on_support,
+    point_coefficients,
+    unit_or,
+)
 
 NORMAL_A, NORMAL_B, CONE_A, CONE_B, AXIAL, SLIP_A, SLIP_B, COP, JUNCTION = range(9)
 NUM_FORCE_CONDITIONS = 9
 UNUSED = 1e30
 JUNCTION_TOL = 1e-12  # of the junction margin (a difference of cosines)
+# how far (in blend speeds) friction may push a slide from rest's slip on; above the quarter
+# blend speed that is the slip conditions' tolerance, so that the condition starts armed
+PUSH = 0.3
 
 
 def _sqrt_pos(x):
@@ -116,6 +129,23 @@ def mode_slips(sol: Solution, mode):
     return slips, sliding, points
 
 
+def slide_end(slip, direction, from_rest, tol) -> jax.Array:
+    """The condition (m/s) that ends a slide with slip `slip` (a point's, world; a face's
+    slip twist): it fires when the slip has stopped. A slide that started from rest in the
+    unit direction `direction` (s0), its friction opposing s_f = unit(s + blend s0), has
+    stopped when its slip along s0 has passed zero by half the blend speed (friction still
+    opposes s0 there), or when friction pushes the slip on: s . s_f below -`PUSH` times the
+    blend speed (friction on its cone could then hold the slip near zero, a creep that no
+    other condition ends); the next mode is chosen again. Any other slide has stopped when
+    its speed has fallen to half the stop speed, where the next mode may stick whatever the
+    root finder's resolution (a slip that only turns, as a coin's on its rim, does not end
+    it)."""
+    blend = tol.slip_blend
+    turned = slip @ direction + 0.5 * blend
+    pushed = slip @ unit_or(slip + blend * direction, direction) + PUSH * blend
+    return jnp.where(from_rest, jnp.minimum(turned, pushed), _safe_norm(slip) - 0.5 * tol.slip_stop)
+
+
 def conditions(sol: Solution, mode, model, scene, tol) -> jax.Array:
     """The condition vector (P + 8,) of `mode` at the solution's state."""
     dtype = sol.acc.dtype
@@ -125,21 +155,10 @@ def conditions(sol: Solution, mode, model, scene, tol) -> jax.Array:
     gaps = jnp.where(active_points(model, mode), big, geom.gap - threshold)
     mu, _, _ = point_coefficients(scene, model)
     force = force_margins(sol.lam / scene.body.mass, rows, mode, model, geom, mu)
-    # a slide ends when its slip has stopped: one that started from rest when its slip,
-    # along the direction it started in, has passed zero (by half the blend speed, where
-    # friction still opposes that direction); any other when its speed has fallen to the
-    # stop speed (a slip that only turns, as a coin's on its rim, does not end it)
     slips, sliding, _ = mode_slips(sol, mode)
     dir_a = jnp.where(mode.kind == FACE, mode.twist_dir, mode.slide_dir[0])
-
-    def slip_condition(slip, direction, from_rest):
-        turned = slip @ direction + 0.5 * tol.slip_blend
-        # half the stop speed: at the event the slip is within the stop speed, where the
-        # next mode may stick, whatever the root finder's resolution
-        return jnp.where(from_rest, turned, _safe_norm(slip) - 0.5 * tol.slip_stop)
-
-    end_a = slip_condition(slips[0], dir_a, mode.from_rest[0])
-    end_b = slip_condition(slips[1], mode.slide_dir[1], mode.from_rest[1])
+    end_a = slide_end(slips[0], dir_a, mode.from_rest[0], tol)
+    end_b = slide_end(slips[1], mode.slide_dir[1], mode.from_rest[1], tol)
     force = force.at[SLIP_A].set(jnp.where(sliding[0], end_a, big))
     force = force.at[SLIP_B].set(jnp.where(sliding[1], end_b, big))
     # the ball passes to another part of a curved surface (its curvature jumps there)

@@ -132,6 +132,13 @@ def point_sliding_direction(b, K, mu, n, t1, t2):
     return scan_direction(measure, n, t1, t2, b.dtype)
 
 
+def stabilisation_offsets(geom, beta):
+    """What `relative_accelerations` adds to each point's acceleration (P, 3, world, m/s^2):
+    (2 beta g' + beta^2 g) n + beta s. It depends on the state alone."""
+    drift = 2 * beta * geom.gap_rate + beta**2 * geom.gap
+    return drift[:, None] * geom.n + beta * geom.slip
+
+
 def relative_accelerations(acc, geom, beta):
     """Point accelerations `acc` (P, 3, world, m/s^2) taken relative to the targets that the
     stabilisation (rate `beta`, 1/s) sets a held contact: the normal part plus 2 beta g' +
@@ -139,8 +146,7 @@ def relative_accelerations(acc, geom, beta):
     forces make these zero on the rows it holds, so its successors' conditions, tested on
     them, hold exactly where its own forces reach their bounds (docs/contact.md, section 3);
     on the constraint manifold (g = g' = 0, no slip) they are the accelerations themselves."""
-    drift = 2 * beta * geom.gap_rate + beta**2 * geom.gap
-    return acc + drift[:, None] * geom.n + beta * geom.slip
+    return acc + stabilisation_offsets(geom, beta)
 
 
 class Choice(eqx.Module):
@@ -190,7 +196,9 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
 
     # the mode's solution for any sliding directions, at the cost of a 2 x 2 solve each
     solve = sliding_solver(t, state, mode, scene, model, tol, geom)
-    relative = lambda sol: relative_accelerations(sol.point_accelerations(), geom, beta)  # noqa: E731
+    # `relative_accelerations`, its offsets computed once: the searches below solve many times
+    offsets = stabilisation_offsets(geom, beta)
+    relative = lambda sol: sol.point_accelerations() + offsets  # noqa: E731
 
     # sliding from rest starts opposite to the friction that sticking would need (exactly so
     # at the cone's boundary, where the slip's acceleration vanishes)
@@ -219,9 +227,7 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
     # the point's acceleration without contact force: J u' - K lambda, plus the rows' bias,
     # relative to the stabilisation's targets (`relative_accelerations`)
     u_dot = jnp.concatenate([held.acc, held.alpha])
-    bp = frame.T @ (Jp @ u_dot - Kp @ lam[keep] + rows.bias[keep])
-    drift_a = 2 * beta * geom.gap_rate[mode.a] + beta**2 * geom.gap[mode.a]
-    bp = bp + drift_a * frame[0] + beta * geom.slip[mode.a]
+    bp = frame.T @ (Jp @ u_dot - Kp @ lam[keep] + rows.bias[keep]) + offsets[mode.a]
     mu, _, _ = point_coefficients(scene, model)
     point_dir, found = only_where_needed(
         live & (mode.kind == POINT) & rest_a,
