@@ -357,7 +357,7 @@ def main(argv=None):
         )
         r = checks(out, kind, args.rtol)
         # a rise between saves that falls with the tolerance is the solver's error
-        rose = np.flatnonzero(r["rise_saves"] > args.rtol)
+        rose = np.flatnonzero(r["rises"])
         r["rise_refined"] = np.full((len(REFINE), args.n), np.nan)
         if rose.size:
             r["rise_refined"][:, rose] = refined_rises(

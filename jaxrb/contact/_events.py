@@ -42,9 +42,9 @@ from ._modes import (
     POINT,
     Solution,
     active_points,
+    blend_direction,
     on_support,
     point_coefficients,
-    unit_or,
 )
 
 NORMAL_A, NORMAL_B, CONE_A, CONE_B, AXIAL, SLIP_A, SLIP_B, COP, JUNCTION = range(9)
@@ -142,7 +142,7 @@ def slide_end(slip, direction, from_rest, tol) -> jax.Array:
     it)."""
     blend = tol.slip_blend
     turned = slip @ direction + 0.5 * blend
-    pushed = slip @ unit_or(slip + blend * direction, direction) + PUSH * blend
+    pushed = slip @ blend_direction(slip, direction, blend) + PUSH * blend
     return jnp.where(from_rest, jnp.minimum(turned, pushed), _safe_norm(slip) - 0.5 * tol.slip_stop)
 
 

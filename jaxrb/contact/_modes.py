@@ -645,14 +645,21 @@ def tree_zeros(tree):
     return jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), tree)
 
 
+def blend_direction(slip, start, blend):
+    """The direction sliding friction opposes, unit(s + blend s0) (the last axis), for a slip
+    s (m/s) whose unit direction at the segment's start was s0 = `start`. Where the slip is
+    large against `blend` (m/s) this is the slip's direction; where sliding starts from rest
+    it is s0, and in between it turns smoothly."""
+    return unit_or(slip + blend * start, start)
+
+
 def sliding_hats(geom: Geometry, twist, mode: Mode, blend):
-    """The directions sliding friction opposes: of s + blend s0 for each slip s (points a, b;
-    the face's twist), s0 the mode's unit direction of that slip at the segment's start. Where
-    the slip is large against `blend` (m/s) this is the slip's direction; where sliding starts
-    from rest it is s0, and in between it turns smoothly."""
+    """The directions sliding friction opposes (`blend_direction`) for each slip (points a,
+    b; the face's twist), from the mode's unit directions of those slips at the segment's
+    start."""
     seeds = jnp.stack([mode.slide_dir[0], mode.slide_dir[1], mode.twist_dir])
     slips = jnp.stack([geom.slip[mode.a], geom.slip[mode.b], twist])
-    hat_a, hat_b, hat_f = unit_or(slips + blend * seeds, seeds)
+    hat_a, hat_b, hat_f = blend_direction(slips, seeds, blend)
     return hat_a, hat_b, hat_f
 
 
