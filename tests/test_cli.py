@@ -394,13 +394,24 @@ def test_show_default(capsys):
     assert "[body]" in out and "restitution" in out
 
 
-def test_console_entry_point():
-    """`python -m jaxrb` is the console script; --help works and is quick."""
+def test_console_entry_point(tmp_path):
+    """`python -m jaxrb` is the console script; --help works and is quick; the process ends
+    without the interpreter's teardown, with `main`'s exit status and its output whole."""
     proc = subprocess.run(
         [sys.executable, "-m", "jaxrb", "--help"], capture_output=True, text=True, timeout=60
     )
     assert proc.returncode == 0, proc.stderr
     assert "usage: jaxrb" in proc.stdout
+    assert proc.stdout.endswith("body->world.\n")  # the help's last words: nothing lost
+    missing = tmp_path / "no_such_scene.toml"
+    proc = subprocess.run(
+        [sys.executable, "-m", "jaxrb", "run", str(missing)],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 2
+    assert proc.stderr.startswith("jaxrb run: error: ") and "no such scene file" in proc.stderr
 
 
 def test_compilation_cache_in_the_users_cache_directory(scene_file, tmp_path):
