@@ -8,17 +8,20 @@ the old. `prune_cache` removes the least recently used files until the directory
 most a given size; `speed_up_compilation` calls it once per process, before the first
 compile, with `DEFAULT_MAX_MB` or `$JAXRB_CACHE_MAX_MB`.
 
-A file's last use is the later of its access and modification times. jaxrb marks a kept
-program used when it loads it (`mark_used`). JAX reads its files without such a mark, and
-most file systems (Linux's default `relatime`) advance a file's access time on a read only
-where it is a day old or older than the file's last write: a JAX file may have been used up
-to `ACCESS_TIME_LAG_S` after its access time says, and it is counted as used then. (Taken
-at its word, the access time made the small programs that every run reads look older than
-the programs an edit had made obsolete hours before, and a prune removed the former.)
+A file's last use is the later of its access and modification times. Most file systems
+(Linux's default `relatime`) advance a file's access time on a read only where it is a day
+old or older than the file's last write, so a read is marked by hand: jaxrb marks a kept
+program used when it loads it (`mark_used`), and, once `mark_jax_reads` has run (as
+`speed_up_compilation` and `JAXRB_PROGRAMS=1` do), every file JAX's persistent cache reads
+back. (Counting a JAX file as used up to a day after its access time, as jaxrb did before,
+ranked every file JAX had read that day above every kept program, those of the code just
+edited included: the first prune after an edit removed all the traced programs it had
+kept, and the next run of the test suite traced them all again.)
 A file another process is reading or writing at that moment may be removed under it: JAX
 and jaxrb then compile that program again.
 """
 
+import functools
 import os
 import stat
 import time
@@ -27,7 +30,6 @@ from pathlib import Path
 DEFAULT_MAX_MB = 1024.0  # megabytes (2**20 bytes): a test suite's programs take ~250 MB
 KEEP_FRACTION = 0.8  # a prune leaves this share of the bound, so that it is not run every time
 STALE_TEMPORARY_S = 3600.0  # a half-written file (`*.tmp`) older than this is left over
-ACCESS_TIME_LAG_S = 86400.0  # how far a file system's access time may lag a read (relatime)
 
 
 def cache_max_bytes(max_mb: float | None) -> int | None:
@@ -58,10 +60,37 @@ def mark_used(path: Path) -> None:
         pass
 
 
+def mark_jax_reads() -> None:
+    """From now on, in this process, mark every file JAX's persistent compilation cache
+    reads back as used (`mark_used`), so that a prune ranks it by its last use. Wraps the
+    read of JAX's file cache (`jax._src.lru_cache.LRUCache.get`, a private class: where it
+    is missing, nothing is marked). Idempotent."""
+    try:
+        from jax._src import lru_cache
+    except ImportError:
+        return
+    cache = getattr(lru_cache, "LRUCache", None)
+    read = getattr(cache, "get", None)
+    if read is None or getattr(read, "marks_use", False):
+        return
+
+    @functools.wraps(read)
+    def get(self, key):
+        value = read(self, key)
+        if value is not None:
+            try:
+                mark_used(Path(str(self.path)) / f"{key}{lru_cache._CACHE_SUFFIX}")
+            except Exception:  # noqa: BLE001  (a cache elsewhere than a local folder)
+                pass
+        return value
+
+    get.marks_use = True
+    cache.get = get
+
+
 def _entries(directory: Path) -> list[tuple[float, int, list[Path]]]:
     """(last use, size, files) of every cache entry in `directory` and its `programs`
-    folder; a JAX entry is its `-cache` file with its `-atime` file, used at the latest
-    time its access time allows (module docstring)."""
+    folder; a JAX entry is its `-cache` file with its `-atime` file."""
     entries = []
     now = time.time()
     for folder in (directory, directory / "programs"):
@@ -84,9 +113,8 @@ def _entries(directory: Path) -> list[tuple[float, int, list[Path]]]:
                 if now - st.st_mtime < STALE_TEMPORARY_S:
                     continue  # another process is writing it
                 used = 0.0  # left over by a process that stopped while writing: first out
-            if name.endswith("-cache"):  # JAX's: read without a mark
+            if name.endswith("-cache"):  # JAX's own LRU mark, where on, goes with it
                 files.append(folder / (name[: -len("-cache")] + "-atime"))
-                used = max(st.st_mtime, st.st_atime + ACCESS_TIME_LAG_S)
             entries.append((used, st.st_size, files))
     return entries
 

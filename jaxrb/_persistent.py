@@ -56,7 +56,7 @@ import jax
 import numpy as np
 from jax import export
 
-from ._cache_size import mark_used
+from ._cache_size import mark_jax_reads, mark_used
 
 _PACKAGES = ("jax", "jaxlib", "equinox", "diffrax", "optimistix", "lineax")
 _RUNTIME_ERROR = getattr(jax.errors, "JaxRuntimeError", RuntimeError)  # XLA's, at run time
@@ -301,6 +301,8 @@ _KEEP = {
     "dir": None,
     "sources": tuple(p for p in os.environ.get("JAXRB_PROGRAM_SOURCES", "").split(os.pathsep) if p),
 }
+if _KEEP["on"]:  # jaxrb manages the cache folder: its prune needs JAX's reads marked
+    mark_jax_reads()
 
 
 def keep_programs(on: bool, cache_dir=None, sources=None) -> None:
@@ -311,6 +313,8 @@ def keep_programs(on: bool, cache_dir=None, sources=None) -> None:
     then be in a kept program's key, with the content of these files."""
     _KEEP["on"] = bool(on)
     _KEEP["dir"] = cache_dir
+    if on:
+        mark_jax_reads()
     if sources is not None:
         _KEEP["sources"] = tuple(str(Path(p).expanduser().resolve()) for p in sources)
 

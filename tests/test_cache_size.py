@@ -28,21 +28,21 @@ def test_the_least_recently_used_entries_go_first_down_to_the_kept_share(tmp_pat
     day = 86400
     old_jax = _entry(tmp_path / "old-cache", 3 * MB, 3 * day)  # JAX's: not read for days
     old_atime = _entry(tmp_path / "old-atime", 8, 3 * day)  # JAX's own LRU mark: goes with it
+    # a JAX file read 10 h ago, older than the programs below (reads are marked by hand:
+    # `mark_jax_reads`; counted up to a day later, it would outrank them all)
+    earlier_jax = _entry(tmp_path / "new-cache", 2 * MB, 10 * 3600)
     old_program = _entry(programs / "a.bin", 2 * MB, 300)
     middle = _entry(programs / "a.cafe.exe", 2 * MB, 200)
-    # a JAX file whose access time says 10 h ago may have been read since (the file
-    # system advances it once a day): it counts as used later than the programs above
-    lagging_jax = _entry(tmp_path / "new-cache", 2 * MB, 10 * 3600)
     newest = _entry(programs / "b.bin", 1 * MB, 0)
     lock = _entry(tmp_path / ".lockfile", 0, 1000)
     # 10 MB (and 8 bytes) over a bound of 8 MB: prune to 0.8 * 8 = 6.4 MB, oldest first
     removed = prune_cache(tmp_path, 8 * MB)
     assert removed == 5 * MB
-    assert not old_jax.exists() and not old_atime.exists() and not old_program.exists()
-    assert middle.exists() and lagging_jax.exists() and newest.exists() and lock.exists()
+    assert not old_jax.exists() and not old_atime.exists() and not earlier_jax.exists()
+    assert old_program.exists() and middle.exists() and newest.exists() and lock.exists()
     # under the bound nothing goes
     assert prune_cache(tmp_path, 8 * MB) == 0
-    assert middle.exists()
+    assert old_program.exists()
     assert prune_cache(tmp_path, None) == 0
 
 
@@ -86,6 +86,32 @@ def test_a_loaded_program_is_marked_used(tmp_path):
     assert float(out[2]) == 4.0
     used = [max(f.stat().st_atime, f.stat().st_mtime) for f in files if f.exists()]
     assert max(used) > time.time() - 600
+
+
+def test_a_program_read_back_from_jax_s_cache_is_marked_used(tmp_path):
+    """In processes of their own: the first compiles a small program into the cache, the
+    second reads it back; its file then counts as used now, not when it was written."""
+    code = (
+        "import jax, jaxrb; "
+        f"jaxrb.speed_up_compilation(cache_dir={str(tmp_path)!r}, programs=False); "
+        "print(jax.jit(lambda x: 3.0 * x + 1.0)(2.0))"
+    )
+    env = dict(os.environ, JAX_PLATFORMS="cpu", JAXRB_CACHE_MAX_MB="none")
+    env.pop("JAX_COMPILATION_CACHE_DIR", None)
+    run = lambda: subprocess.run(  # noqa: E731
+        [sys.executable, "-c", code], env=env, check=True, timeout=120, capture_output=True
+    )
+    run()
+    written = sorted(tmp_path.glob("jit_*-cache"))
+    assert written, sorted(p.name for p in tmp_path.iterdir())
+    # a read never moves a file's modification time (and on most file systems, Linux's
+    # `relatime`, its access time at most once a day): the mark by hand moves both
+    long_ago = time.time() - 10 * 86400
+    for f in written:
+        os.utime(f, (long_ago, long_ago))
+    assert run().stdout.strip() == b"7.0"
+    assert max(f.stat().st_mtime for f in written) > time.time() - 600
+    assert sorted(tmp_path.glob("jit_*-cache")) == written  # read back, not compiled again
 
 
 def test_speed_up_compilation_prunes_its_directory_once_at_the_start(tmp_path):
