@@ -242,14 +242,50 @@ def test_coins_lift_off_and_start_to_slip_with_a_consistent_mode():
     assert not np.any(np.asarray(log.event_inconsistent))
 
 
+# a coin of `contact_throws` (throw 6 of `throws(60, 0)`) 0.56 s into its throw, rolling on its
+# rim at a tilt of about 45 degrees (position m, quaternion, velocity m/s, omega rad/s, body)
+ROLLING_COIN = (
+    (-0.05722568371659757, -0.1111920876480065, 0.00980944884113742),
+    (0.31033287644954044, 0.07295330693247865, 0.9041526642036455, 0.28439282799610094),
+    (0.05343685271297912, -0.03058540023765986, -0.0166515346065274),
+    (14.892898431640937, -12.531791163854276, 6.356080671478968),
+)
+
+
+def test_a_rolling_coins_brief_slides_from_rest_take_hundreds_of_steps_not_thousands():
+    """The rolling coin above, on floors of friction 0.438 (its throw's) and 0.45, for 1 s.
+    With 0.45 it rolls throughout. With 0.438 the friction its rolling needs leaves the cone
+    every 0.12 s for about 4.6 ms: a slide from rest whose slip stays within a few blend
+    speeds, where friction's direction follows the slip at about mu g / blend. With the
+    blend speed at a tenth of `slip_stop` those eight slides took 1830 steps each (15307 in
+    the second against 683 rolling); with it at `slip_stop`, about 680 (6093)."""
+    pos, quat, vel, omega = (jnp.asarray(x) for x in ROLLING_COIN)
+    coin = jaxrb.make_state(pos=pos, quat=quat, vel=vel, omega=omega)
+    states = jax.tree.map(lambda x: jnp.stack([x] * 3), coin)
+    friction = jnp.array([0.4379113542237306, 0.45, 0.45])
+    batch = _coin_throws(states, jnp.full(3, 0.39657751143910197), friction)
+    log = batch.contact
+    assert np.all(np.asarray(batch.result._value) == jaxrb.RESULTS.successful._value)
+    np.testing.assert_array_equal(np.asarray(log.inconsistent), 0)
+    causes = [
+        [jaxrb.contact.CAUSES[int(c)] for c in log.event_cause[m, 1 : int(log.events[m]) + 1]]
+        for m in range(2)
+    ]
+    assert causes[1] == []  # rolls throughout
+    assert causes[0] == ["slip starts", "slip stops"] * 8, causes[0]
+    steps = np.asarray(batch.num_steps)
+    assert steps[1] < 1000, steps
+    assert steps[0] - steps[1] < 8 * 1000, steps  # under 1000 steps per slide
+
+
 # ------------------------------------------------------------ the end of a slide from rest
 
 BLEND = TOL.slip_blend  # m/s
 # coin 84 of `contact_throws --n 300`, run with the mode choice of before its conditions were
 # taken relative to the stabilisation's targets and without this condition: a rim point's
 # slide from rest, 0.7047 s into the throw, whose slip stayed at 5e-7 m/s for 1e5 steps (its
-# slip along the start direction and across it, m/s)
-CREEP = (-4.886e-7, 2.084e-7)
+# slip along the start direction and across it, in blend speeds: 1e-6 m/s then)
+CREEP = (-0.4886 * BLEND, 0.2084 * BLEND)
 
 
 def _slips_from_rest(cases):

@@ -6,6 +6,12 @@ import equinox as eqx
 import jax.numpy as jnp
 
 DEFAULT_MAX_IMPACTS = 64
+# the blend speed (`Tolerances.slip_blend`) per stop speed. Friction's direction follows a
+# slip within the blend speed at about mu g / blend (an explicit solver's steps near
+# blend / (mu g)): at a tenth of the stop speed, a coin's brief slides from rest while it
+# rolls took 90 % of its steps (benchmarks/README.md); a turn-back at -blend / 2 still ends
+# inside the band the mode choice counts as at rest (|s| < slip_stop)
+BLEND_PER_STOP = 1.0
 DEFAULT_REST_SPEED = 1e-2
 
 
@@ -35,7 +41,7 @@ class ContactOptions(eqx.Module):
       feature). Default 1e-2.
     - `slip_stop`: (m/s) at an event, a contact whose slip is below this counts as not
       sliding (the rest is removed by the friction impulse of the last instant), and a
-      touching point whose normal speed is below it counts as resting. A tenth of it is the
+      touching point whose normal speed is below it counts as resting. It is also the
       blend speed below which friction that starts from rest turns smoothly to the slip's
       direction. Default 1e-5.
     - `contact_tol`: (m) gap below which a point counts as touching at an event; default
@@ -114,7 +120,7 @@ class ContactOptions(eqx.Module):
             penetration=1e-12 if double else 1e-6,
             velocity=1e-10 if double else 1e-5,
             slip_stop=self.slip_stop,
-            slip_blend=self.slip_stop * 0.1,
+            slip_blend=self.slip_stop * BLEND_PER_STOP,
             rest_speed=self.rest_speed,
             stabilisation=self.stabilisation,
         )
