@@ -1005,7 +1005,10 @@ def console_main() -> None:
             stream.flush()
         except (OSError, ValueError):  # closed early (`jaxrb run | head`): nothing to keep
             pass
-    atexit._run_exitfuncs()
+    run_exit_handlers = getattr(atexit, "_run_exitfuncs", None)  # CPython's
+    if run_exit_handlers is None:  # elsewhere: the usual exit, teardown and all
+        sys.exit(code)
+    run_exit_handlers()
     os._exit(code)
 
 
