@@ -2,6 +2,7 @@
 directions by a 2 x 2 Woodbury update) against the direct 6 x 6 solve, and its choice (the
 candidates of the resting points, tested a chunk at a time) against testing every mode."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -449,6 +450,32 @@ def test_mode_choice_equals_testing_every_mode():
             np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
         # and most states have a consistent mode of contact
         assert np.mean(np.asarray(chosen.kind) != 0) > 0.5
+
+
+def test_a_shape_without_pairs_has_no_pair_search_in_its_program(monkeypatch):
+    """A candidate's sliding directions from rest are searched for a pair's ends only where
+    the shape has pairs: a ball on one surface (no pair modes) traces no pair search, a box
+    does (each candidate traced, not run)."""
+    import jaxrb.contact._select as select
+
+    searched = []
+    real = select._pair_directions
+    monkeypatch.setattr(
+        select, "_pair_directions", lambda *args: searched.append(True) or real(*args)
+    )
+    for shape, pairs in ((jaxrb.Sphere(0.01), False), (CHOICE_SHAPES[0], True)):
+        model = contact_model(shape)
+        assert bool(model.pairs) == pairs
+        old = flight_mode(jnp.float64)
+        state = jaxrb.make_state(pos=[0.0, 0.0, 0.01])
+        scene = _scene(shape)
+        geom = geometry(state, scene, model, old.seed, old.side)
+        resting = jnp.ones(model.num_points, bool)
+        candidate = CandidateTable(model).mode(0, old)
+        searched.clear()
+        args = (0.0, state, geom, candidate, scene, model, TOL, resting, resting, True)
+        eqx.filter_eval_shape(select._candidate, *args)
+        assert searched == ([True] if pairs else [])
 
 
 # ------------------------------------- a face that slides on three of its vertices (a support)

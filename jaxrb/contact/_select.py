@@ -242,79 +242,12 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
         jnp.where(rest_b, unit_or(-need_b, zero3), unit_or(geom.slip[mode.b], zero3)),
         jnp.where(rest_f, unit_or(-need_f, zero3), unit_or(twist, zero3)),
     )
-    # a pair with one end sliding and the other starting from rest: that end's direction
-    # by a scan with the sliding end's direction fixed (exact, as for a single point)
-    pair = mode.kind == PAIR
-    scan_b = pair & rest_b & ~rest_a
-
-    def end_measure(end, s):
-        hats = (jnp.where(end == 0, s, hats0[0]), jnp.where(end == 0, hats0[1], s), hats0[2])
-        sol = solve(hats)
-        acc = geom.tangential(relative(sol))
-        return acc[jnp.where(end == 0, mode.a, mode.b)], (sol.lam[0] >= 0) & (sol.lam[1] >= 0)
-
-    end = jnp.where(scan_b, 1, 0)
-    end_dir, end_found = only_where_needed(
-        live & pair & (rest_a != rest_b),
-        lambda: scan_direction(
-            lambda s: end_measure(end, s),
-            *geom.frame_of(jnp.where(scan_b, mode.b, mode.a)),
-            dtype,
-        ),
-        lambda: (zero3, jnp.array(False)),
-    )
-    exact_a = pair & rest_a & ~rest_b & end_found
-    exact_b = scan_b & end_found
-    hats0 = (
-        jnp.where(exact_a, end_dir, hats0[0]),
-        jnp.where(exact_b, end_dir, hats0[1]),
-        hats0[2],
-    )
-    # a pair whose ends both start from rest: both directions at once, by Newton from the
-    # directions opposite to the friction sticking would need and from those across and
-    # along the line (rigidity ties the two ends' slips along it, and a line that slides
-    # sideways as a whole has both ends sliding across it)
-    # (each end's directions in its own point's frame)
-    ends = (geom.frame_of(mode.a), geom.frame_of(mode.b))
-    chord = geom.r[mode.b] - geom.r[mode.a]
-    angle = lambda s, end: jnp.arctan2(s @ end[2], s @ end[1])  # noqa: E731
-    on_floor = lambda x, end: jnp.cos(x) * end[1] + jnp.sin(x) * end[2]  # noqa: E731
-
-    def line_angles(end):  # the directions across and along the line at that end
-        n, t1, _ = end
-        line = unit_or(chord - (chord @ n) * n, t1)
-        return angle(cross(n, line), end), angle(line, end)
-
-    (across_a, along_a), (across_b, along_b) = line_angles(ends[0]), line_angles(ends[1])
-    seeds = jnp.stack(
-        [
-            jnp.stack([angle(hats0[0], ends[0]), angle(hats0[1], ends[1])]),
-            jnp.stack([across_a, across_b]),
-            jnp.stack([across_a + jnp.pi, across_b + jnp.pi]),
-            jnp.stack([along_a, along_b]),
-            jnp.stack([along_a + jnp.pi, along_b + jnp.pi]),
-        ]
-    )
-
-    def pair_measure(x):
-        sa, sb = on_floor(x[0], ends[0]), on_floor(x[1], ends[1])
-        sol = solve((sa, sb, hats0[2]))
-        acc = geom.tangential(relative(sol))
-        aa, ab = acc[mode.a], acc[mode.b]
-        turning = jnp.stack([cross(aa, sa) @ ends[0][0], cross(ab, sb) @ ends[1][0]])
-        return turning, jnp.stack([aa @ sa, ab @ sb]), (sol.lam[0] >= 0) & (sol.lam[1] >= 0)
-
-    pair_x, pair_found = only_where_needed(
-        live & pair & rest_a & rest_b,
-        lambda: newton_directions(pair_measure, seeds, dtype),
-        lambda: (seeds[0], jnp.array(False)),
-    )
-    exact_pair = pair & rest_a & rest_b & pair_found
-    hats0 = (
-        jnp.where(exact_pair, on_floor(pair_x[0], ends[0]), hats0[0]),
-        jnp.where(exact_pair, on_floor(pair_x[1], ends[1]), hats0[1]),
-        hats0[2],
-    )
+    # a shape without pairs (a ball on one surface) has no pair modes: no pair searches
+    exact_a = exact_b = exact_pair = jnp.array(False)
+    if model.pairs:
+        hats0, exact_a, exact_b, exact_pair = _pair_directions(
+            geom, mode, hats0, rest_a, rest_b, live, solve, relative, dtype
+        )
     small = 1e-6 * (1.0 + _safe_norm(held.acc))  # slip accelerations below this: keep the seed
 
     def slip_rates(sol):  # relative to the stabilisation's targets, as every condition
@@ -392,6 +325,89 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
     clear = jnp.all(gap_margin >= -tol.force)
     paradox = slides & clear & not_p_matrix(sol, mode, scene.body)
     return chosen, jnp.concatenate([gap_margin, force, align]), still, paradox
+
+
+def _pair_directions(geom, mode, hats0, rest_a, rest_b, live, solve, relative, dtype):
+    """The sliding directions from rest of a pair's ends (`_candidate`): one end sliding,
+    the other from rest, by a scan; both from rest, by Newton. `solve(hats)` solves the
+    candidate for given directions, `relative(sol)` its point accelerations relative to
+    the stabilisation's targets. Returns the directions and which are exact (a, b,
+    both)."""
+    zero3 = jnp.zeros(3, dtype)
+    # a pair with one end sliding and the other starting from rest: that end's direction
+    # by a scan with the sliding end's direction fixed (exact, as for a single point)
+    pair = mode.kind == PAIR
+    scan_b = pair & rest_b & ~rest_a
+
+    def end_measure(end, s):
+        hats = (jnp.where(end == 0, s, hats0[0]), jnp.where(end == 0, hats0[1], s), hats0[2])
+        sol = solve(hats)
+        acc = geom.tangential(relative(sol))
+        return acc[jnp.where(end == 0, mode.a, mode.b)], (sol.lam[0] >= 0) & (sol.lam[1] >= 0)
+
+    end = jnp.where(scan_b, 1, 0)
+    end_dir, end_found = only_where_needed(
+        live & pair & (rest_a != rest_b),
+        lambda: scan_direction(
+            lambda s: end_measure(end, s),
+            *geom.frame_of(jnp.where(scan_b, mode.b, mode.a)),
+            dtype,
+        ),
+        lambda: (zero3, jnp.array(False)),
+    )
+    exact_a = pair & rest_a & ~rest_b & end_found
+    exact_b = scan_b & end_found
+    hats0 = (
+        jnp.where(exact_a, end_dir, hats0[0]),
+        jnp.where(exact_b, end_dir, hats0[1]),
+        hats0[2],
+    )
+    # a pair whose ends both start from rest: both directions at once, by Newton from the
+    # directions opposite to the friction sticking would need and from those across and
+    # along the line (rigidity ties the two ends' slips along it, and a line that slides
+    # sideways as a whole has both ends sliding across it)
+    # (each end's directions in its own point's frame)
+    ends = (geom.frame_of(mode.a), geom.frame_of(mode.b))
+    chord = geom.r[mode.b] - geom.r[mode.a]
+    angle = lambda s, end: jnp.arctan2(s @ end[2], s @ end[1])  # noqa: E731
+    on_floor = lambda x, end: jnp.cos(x) * end[1] + jnp.sin(x) * end[2]  # noqa: E731
+
+    def line_angles(end):  # the directions across and along the line at that end
+        n, t1, _ = end
+        line = unit_or(chord - (chord @ n) * n, t1)
+        return angle(cross(n, line), end), angle(line, end)
+
+    (across_a, along_a), (across_b, along_b) = line_angles(ends[0]), line_angles(ends[1])
+    seeds = jnp.stack(
+        [
+            jnp.stack([angle(hats0[0], ends[0]), angle(hats0[1], ends[1])]),
+            jnp.stack([across_a, across_b]),
+            jnp.stack([across_a + jnp.pi, across_b + jnp.pi]),
+            jnp.stack([along_a, along_b]),
+            jnp.stack([along_a + jnp.pi, along_b + jnp.pi]),
+        ]
+    )
+
+    def pair_measure(x):
+        sa, sb = on_floor(x[0], ends[0]), on_floor(x[1], ends[1])
+        sol = solve((sa, sb, hats0[2]))
+        acc = geom.tangential(relative(sol))
+        aa, ab = acc[mode.a], acc[mode.b]
+        turning = jnp.stack([cross(aa, sa) @ ends[0][0], cross(ab, sb) @ ends[1][0]])
+        return turning, jnp.stack([aa @ sa, ab @ sb]), (sol.lam[0] >= 0) & (sol.lam[1] >= 0)
+
+    pair_x, pair_found = only_where_needed(
+        live & pair & rest_a & rest_b,
+        lambda: newton_directions(pair_measure, seeds, dtype),
+        lambda: (seeds[0], jnp.array(False)),
+    )
+    exact_pair = pair & rest_a & rest_b & pair_found
+    hats0 = (
+        jnp.where(exact_pair, on_floor(pair_x[0], ends[0]), hats0[0]),
+        jnp.where(exact_pair, on_floor(pair_x[1], ends[1]), hats0[1]),
+        hats0[2],
+    )
+    return hats0, exact_a, exact_b, exact_pair
 
 
 def exclusions(table, candidates, model, old, trigger):
