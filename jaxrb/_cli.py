@@ -43,6 +43,7 @@ from ._cli_common import (
 )
 from ._cli_fit import add_fit_parser
 from ._compilation import speed_up_compilation
+from ._compile_notice import CompileNotice
 
 MAX_SWEEP_RUNS = 100_000
 """The most grid points (runs) one `jaxrb sweep` may have."""
@@ -354,8 +355,9 @@ def cmd_run(args) -> int:
             f"integrating t = {spec.ts[0]:g} .. {spec.ts[-1]:g} s ..."
         )
         t0 = time.perf_counter()
-        traj = _simulate_checked(spec, progress=args.progress)
-        traj.ts.block_until_ready()
+        with CompileNotice(say, cached=not args.no_cache):
+            traj = _simulate_checked(spec, progress=args.progress)
+            traj.ts.block_until_ready()
         wall = time.perf_counter() - t0
         from ._trajectory_files import file_arrays
 
