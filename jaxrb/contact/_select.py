@@ -34,6 +34,7 @@ from ._modes import (
     tree_zeros,
     unit_or,
 )
+from ._options import FORCE_TOL_PER_FORCE
 
 FIXED_POINT_ITERATIONS = 4
 DIRECTIONS = 64  # angles scanned for a sliding direction from rest
@@ -475,7 +476,10 @@ def select_mode(
     def verdict(admissible, margins, still, paradox):
         admissible = admissible & still
         violation = jnp.max(jnp.maximum(-margins, 0.0), axis=1)
-        ok = admissible & (violation <= tol.force)
+        # the tolerance grows with the candidate's forces (`FORCE_TOL_PER_FORCE`)
+        used = jnp.abs(margins) < 0.5 * UNUSED
+        scale = jnp.max(jnp.where(used, jnp.abs(margins), 0.0), axis=1)
+        ok = admissible & (violation <= tol.force + FORCE_TOL_PER_FORCE * scale)
         return admissible, violation, ok, ok & ~paradox
 
     split = lambda x: x.reshape((-1, size) + x.shape[1:])  # noqa: E731
