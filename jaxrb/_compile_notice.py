@@ -8,11 +8,10 @@ read back from that cache, or one jaxrb kept (no compile at all), says nothing; 
 long integration after a quick compile.
 
 JAX's events for each compile: the lowering's duration (`LOWERED`, when the lowering ends
-and the compile begins); where the persistent cache serves the program, a hit
-(`CACHE_HIT`, as soon as it is found); and the compile's duration (`COMPILED`, at its end,
-also after a hit). A miss is recorded only after the compile (JAX 0.10), too late to use,
-and a hit only once the program is read back: a 1.8 MB contact program took 1.2-1.3 s to
-read on a 2-core x86 CPU, hence `after` = 3 s.
+and the compile begins); where the persistent cache serves the program, a hit (`CACHE_HIT`,
+once the program is read back); and the compile's duration (`COMPILED`, at its end, also
+after a hit). A miss is recorded only after the compile (JAX 0.10), too late to use. A
+1.8 MB contact program took 1.2-1.3 s to read back on a 2-core x86 CPU, hence `after` = 3 s.
 """
 
 import threading
