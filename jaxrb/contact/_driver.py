@@ -48,7 +48,7 @@ from ._modes import (
 )
 from ._options import ContactOptions
 from ._record import ContactLog, add_impact, empty_impacts
-from ._step_end import TRIGGER, CarryingSolver, carried_event_value, carried_rates
+from ._step_end import TRIGGER, CarryingSolver, carried_event_value
 from ._step_limit import limited, step_limit_of
 from ._transition import at_event
 
@@ -144,6 +144,11 @@ class _Segment(eqx.Module):
     mode: object
     offsets: jax.Array
     moving: jax.Array
+    step_end: jax.Array  # the time of the step's end while a step runs, else NaN
+
+    def at_step_end(self, t1):
+        """These arguments while a step ending at t1 runs (`_step_end.py`)."""
+        return eqx.tree_at(lambda a: a.step_end, self, jnp.asarray(t1, self.step_end.dtype))
 
 
 class ContactProgram(eqx.Module):
@@ -281,25 +286,15 @@ class ContactProgram(eqx.Module):
         idle = 64 * jnp.finfo(ts.dtype).eps * jnp.maximum(jnp.abs(t_end), 1.0)
         t0 = jnp.where(done, t_end - idle, t0)
         settings = self.settings
-        args = _Segment(scene, mode, offsets, ~done)
-        at_step_end, condition = _step_end_functions(model, tol)
+        args = _Segment(scene, mode, offsets, ~done, jnp.array(jnp.nan, ts.dtype))
+        rates, at_step_end, condition = _step_end_functions(model, tol)
         state_only = lambda t, y, args: y[0]  # noqa: E731
         # at an event the end state is interpolated at the root: beside it the event
         # function and the index of the condition that ended the segment (`_step_end.py`)
         with checks_without_host_callbacks():
             sol = dfx.diffeqsolve(
-                dfx.ODETerm(
-                    carried_rates(
-                        traced_once(
-                            lambda t, x, args: jnp.where(
-                                args.moving,
-                                mode_rates(t, x, args.mode, args.scene, model, tol),
-                                0.0,
-                            )
-                        )
-                    )
-                ),
-                CarryingSolver(settings.solver, args, at_step_end, condition),
+                dfx.ODETerm(rates),
+                CarryingSolver(settings.solver, args, at_step_end, condition, _Segment.at_step_end),
                 t0=t0,
                 t1=t_end,
                 dt0=settings.dt0,
@@ -390,10 +385,35 @@ class ContactProgram(eqx.Module):
 
 
 def _step_end_functions(model, tol):
-    """(at_step_end, condition) of `CarryingSolver` for a segment (`_step_end.py`): the
-    event function and the step limit at a step's end, from one solve of the mode, with no
-    derivative; and, for the root find, the event function, differentiable, with the index
-    of the smallest shifted condition (the trigger, should the segment end there)."""
+    """(rates, at_step_end, condition) of a segment's `CarryingSolver` (`_step_end.py`): the
+    right-hand side on y = (x, [c, h]), which returns beside the rates of x the event
+    function and the step limit at a step's end (`args.step_end`), from the same solve of
+    the mode, with no derivative; the same two values from a solve of their own, for
+    solvers whose last stage is not the step's end; and, for the root find, the event
+    function, differentiable, with the index of the smallest shifted condition (the
+    trigger, should the segment end there)."""
+
+    @traced_once
+    def rates(t, y, args):
+        x, values = y
+
+        def at_end(sol):
+            sol, mode, scene, offsets = no_derivative((sol, args.mode, args.scene, args.offsets))
+            values = conditions(sol, mode, model, scene, tol)
+            return _carried(sol, values, mode, offsets, model, tol)
+
+        dx, values1 = mode_rates(
+            t,
+            x,
+            args.mode,
+            args.scene,
+            model,
+            tol,
+            t == args.step_end,
+            at_end,
+            jnp.zeros_like(values),
+        )
+        return jnp.where(args.moving, dx, 0.0), values1
 
     @traced_once
     def condition(t, x, args):  # x: the segment's flat state
@@ -407,7 +427,7 @@ def _step_end_functions(model, tol):
         sol, values = _solve_with_conditions(t, unflat(x), args.mode, args.scene, model, tol)
         return _carried(sol, values, args.mode, args.offsets, model, tol)
 
-    return at_step_end, condition
+    return rates, at_step_end, condition
 
 
 def _solve_with_conditions(t, y, mode, scene, model, tol):

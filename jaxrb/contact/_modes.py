@@ -880,17 +880,42 @@ def unflat(x: jax.Array) -> State:
     return State(x[..., 0:3], x[..., 3:7], x[..., 7:10], x[..., 10:13])
 
 
-def mode_rates(t, x: jax.Array, mode: Mode, scene, model, tol) -> jax.Array:
-    """d(state)/dt in `mode` of a flat state `x` (13,) (`flat`), flat: the right-hand side of
-    a contact segment (in flight, of the free body: no contact geometry is computed)."""
+def _held_in_flight(flight):
+    """For `jax.tree.map` over (held, live) inputs: the held (no derivative) one in flight."""
+    return lambda held, live: jnp.where(flight, held, live) if eqx.is_inexact_array(live) else live
 
-    def in_contact():  # each branch takes the vector apart itself: XLA fuses it there
-        sol = solve_mode(t, unit_state(unflat(x)), mode, scene, model, tol)
-        return sol.acc, sol.omega_dot
+
+def mode_rates(t, x: jax.Array, mode: Mode, scene, model, tol, wanted, of_solution, empty):
+    """(d(state)/dt, extra) in `mode` at a flat state `x` (13,) (`flat`): the right-hand
+    side of a contact segment, flat, and `of_solution(sol)` of the mode's solution at x
+    where `wanted` holds, from the same solve (a segment's values at a step's end,
+    `_step_end.py`; no derivative is taken of them), else `empty` (of the same structure).
+    In flight the rates are the free body's, and the mode is solved (the contact geometry
+    computed) only where `wanted`."""
+    flight = mode.kind == FLIGHT
+
+    def solved():  # each branch takes the vector apart itself: XLA fuses it there
+        # in flight the solve serves `of_solution` alone: its inputs are held constant
+        # there, through a select, so that the rates' derivatives are the free body's and
+        # no derivative of the contact geometry reaches x or the scene (a select passes no
+        # NaN of the branch it does not take; a product by zero would)
+        free_rates = accelerations(t, unit_state(unflat(x)), scene)
+        inputs = (x, scene)
+        x_used, scene_used = jax.tree.map(
+            _held_in_flight(flight),
+            no_derivative(inputs),
+            inputs,
+        )
+        sol = solve_mode(t, unit_state(unflat(x_used)), mode, scene_used, model, tol)
+        extra = only_where_needed(wanted, lambda: of_solution(sol), lambda: empty)
+        acc, omega_dot = tree_where(flight, free_rates, (sol.acc, sol.omega_dot))
+        return acc, omega_dot, extra
 
     def in_flight():
-        return accelerations(t, unit_state(unflat(x)), scene)
+        acc, omega_dot = accelerations(t, unit_state(unflat(x)), scene)
+        return acc, omega_dot, empty
 
-    acc, omega_dot = only_where_needed(mode.kind != FLIGHT, in_contact, in_flight)
+    acc, omega_dot, extra = only_where_needed(~flight | wanted, solved, in_flight)
     y = unflat(x)
-    return flat(State(pos=y.vel, quat=quat_rate(y.quat, y.omega), vel=acc, omega=omega_dot))
+    rates = flat(State(pos=y.vel, quat=quat_rate(y.quat, y.omega), vel=acc, omega=omega_dot))
+    return rates, extra

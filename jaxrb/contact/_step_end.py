@@ -10,10 +10,22 @@ user's (`CarryingSolver`) appends both to the state it returns:
 
 x the segment's flat 13-vector (`flat`), c the event function (the smallest shifted
 condition, docs/contact.md section 4) and h the step limit (s), both at x. The event
-function reads c (`carried_event_value`), the controller h. The right-hand side leaves
-[c, h] unchanged (derivative 0), and the inner solver never sees them: its steps, error
-estimates and dense output are those of x alone. At the segment's start the caller gives
-both (it has solved the mode there already).
+function reads c (`carried_event_value`), the controller h. [c, h] do not change within a
+step, and the inner solver's steps, error estimates and dense output of x are those it
+takes without them. At the segment's start the caller gives both (it has solved the mode
+there already).
+
+Where they come from at a step's end:
+
+- With an explicit Runge-Kutta method whose last stage is the step's end (first same as
+  last: Tsit5, Dopri5, Dopri8, Bosh3), that stage already solves the mode at (t1, x1) for
+  the right-hand side. The right-hand side returns [c, h] beside the rates where the
+  arguments say the stage is at the step's end (`mark(args, t1)`: the contact segment's
+  `step_end`), and the solver reads them from the last stage's value, which the method keeps
+  for the next step: no solve of its own, and no copy of the solve in the compiled program.
+  The inner solver then works on (x, w), w the right-hand side's second output, whose
+  increments and error are thrown away.
+- Otherwise (`mark` None, or another method) `at_step_end(t1, x1, args)` computes them.
 
 Between step ends, where the root find of an event evaluates the event function on the
 dense output, the interpolation (`CarryingInterpolation`) computes c from the interpolated
@@ -40,19 +52,47 @@ def carried_event_value(t, y, args, **kwargs):
     return y[1][CONDITION].astype(jnp.result_type(float))
 
 
-def carried_rates(rates):
-    """The right-hand side on y = (x, values) of `rates(t, x, args)`: the values stay."""
-
-    def rhs(t, y, args):
-        x, values = y
-        return rates(t, x, args), jnp.zeros_like(values)
-
-    return rhs
-
-
 def _on_state(terms, values):
     """`terms` (an ODE term on y = (x, values)) as a term on x alone."""
     return dfx.ODETerm(lambda t, x, args: terms.vf(t, (x, values), args)[0])
+
+
+def _encoded(values):
+    """`values` as finite numbers and the signs of their infinities (a step limit may be
+    inf): the inner solver sums the right-hand side's w with the step, and in a
+    derivative's backward pass an infinite w would give 0 * inf = NaN, discarded or not."""
+    infinite = jnp.isinf(values)
+    return jnp.where(infinite, 0.0, values), jnp.where(infinite, jnp.sign(values), 0.0)
+
+
+def _decoded(encoded):
+    finite, sign = encoded
+    return jnp.where(sign != 0, sign * jnp.inf, finite)
+
+
+def _with_last_stage(terms, values):
+    """`terms` as a term on (x, w): its rates and, as w's, its second output, encoded
+    (`_encoded`; module docstring)."""
+
+    def rates(t, xw, args):
+        dx, w = terms.vf(t, (xw[0], values), args)
+        return dx, _encoded(w)
+
+    return dfx.ODETerm(rates)
+
+
+def reads_last_stage(solver) -> bool:
+    """Whether `solver` is an explicit Runge-Kutta method whose last stage is its step's end
+    and whose state keeps that stage's value for the next step (diffrax's first-same-as-last
+    methods; module docstring)."""
+    tableau = getattr(solver, "tableau", None)
+    return (
+        isinstance(solver, dfx.AbstractRungeKutta)
+        and isinstance(tableau, dfx.ButcherTableau)
+        and not tableau.implicit
+        and tableau.fsal
+        and tableau.ssal
+    )
 
 
 class CarryingInterpolation(dfx.AbstractLocalInterpolation):
@@ -67,6 +107,8 @@ class CarryingInterpolation(dfx.AbstractLocalInterpolation):
 
     def evaluate(self, t0, t1=None, left=True):
         x = self.inner.evaluate(t0, t1, left)
+        if isinstance(x, tuple):  # the inner solver's (x, w) (module docstring)
+            x = x[0]
         if t1 is not None:  # an increment: the values do not change
             return x, jnp.zeros(2, x.dtype)
         return x, self.condition(t0, x, self.args)
@@ -74,15 +116,22 @@ class CarryingInterpolation(dfx.AbstractLocalInterpolation):
 
 class CarryingSolver(dfx.AbstractWrappedSolver):
     """`solver` on the segment's state x, returning at each step's end y1 = (x1, [c, h])
-    with `at_step_end(t1, x1, args)` -> [c, h] (no derivative needed: diffrax takes only the
-    sign of c there, the controller h). `condition(t, x, args)` -> [c, k] gives the event
-    function c at an interpolated state, and k there in place of h (module docstring);
-    `args` are the segment's arguments."""
+    (no derivative needed: diffrax takes only the sign of c there, the controller h). Where
+    `mark` is given and `solver` allows it (`reads_last_stage`), [c, h] come from the last
+    stage: the right-hand side, called with the arguments `mark(args, t1)`, returns them
+    beside the rates at time t1; else from `at_step_end(t1, x1, args)`. `condition(t, x,
+    args)` -> [c, k] gives the event function c at an interpolated state, and k there in
+    place of h (module docstring); `args` are the segment's arguments."""
 
     solver: dfx.AbstractSolver
     args: object
     at_step_end: Callable = eqx.field(static=True)
     condition: Callable = eqx.field(static=True)
+    mark: Callable | None = eqx.field(static=True, default=None)
+
+    @property
+    def _last_stage(self) -> bool:
+        return self.mark is not None and reads_last_stage(self.solver)
 
     @property
     def term_structure(self):
@@ -117,14 +166,31 @@ class CarryingSolver(dfx.AbstractWrappedSolver):
 
     def init(self, terms, t0, t1, y0, args):
         x0, values0 = y0
+        if self._last_stage:
+            inner_y0 = (x0, _encoded(values0))
+            return self.solver.init(_with_last_stage(terms, values0), t0, t1, inner_y0, args)
         return self.solver.init(_on_state(terms, values0), t0, t1, x0, args)
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         x0, values0 = y0
-        x1, x_error, dense_info, solver_state, result = self.solver.step(
-            _on_state(terms, values0), t0, t1, x0, args, solver_state, made_jump
-        )
-        values1 = self.at_step_end(t1, x1, args)
+        if self._last_stage:
+            (x1, _), xw_error, dense_info, solver_state, result = self.solver.step(
+                _with_last_stage(terms, values0),
+                t0,
+                t1,
+                (x0, _encoded(values0)),
+                self.mark(args, t1),
+                solver_state,
+                made_jump,
+            )
+            _, (_, w1) = solver_state  # the last stage's value: (rates, [c, h] encoded)
+            values1 = _decoded(w1)
+            x_error = None if xw_error is None else xw_error[0]
+        else:
+            x1, x_error, dense_info, solver_state, result = self.solver.step(
+                _on_state(terms, values0), t0, t1, x0, args, solver_state, made_jump
+            )
+            values1 = self.at_step_end(t1, x1, args)
         y_error = None if x_error is None else (x_error, jnp.zeros_like(values1))
         return (x1, values1), y_error, dense_info, solver_state, result
 
