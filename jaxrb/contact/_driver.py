@@ -146,7 +146,7 @@ class _Segment(eqx.Module):
     moving: jax.Array
     step_end: jax.Array  # the time of the step's end while a step runs, else NaN
 
-    def at_step_end(self, t1):
+    def marked(self, t1):
         """These arguments while a step ending at t1 runs (`_step_end.py`)."""
         return eqx.tree_at(lambda a: a.step_end, self, jnp.asarray(t1, self.step_end.dtype))
 
@@ -294,7 +294,7 @@ class ContactProgram(eqx.Module):
         with checks_without_host_callbacks():
             sol = dfx.diffeqsolve(
                 dfx.ODETerm(rates),
-                CarryingSolver(settings.solver, args, at_step_end, condition, _Segment.at_step_end),
+                CarryingSolver(settings.solver, args, at_step_end, condition, _Segment.marked),
                 t0=t0,
                 t1=t_end,
                 dt0=settings.dt0,
@@ -393,15 +393,14 @@ def _step_end_functions(model, tol):
     function, differentiable, with the index of the smallest shifted condition (the
     trigger, should the segment end there)."""
 
+    def carried_of(sol, args):  # [c, h] of a solution in the segment (no derivative)
+        sol, mode, scene, offsets = no_derivative((sol, args.mode, args.scene, args.offsets))
+        values = conditions(sol, mode, model, scene, tol)
+        return _carried(sol, values, mode, offsets, model, tol)
+
     @traced_once
     def rates(t, y, args):
         x, values = y
-
-        def at_end(sol):
-            sol, mode, scene, offsets = no_derivative((sol, args.mode, args.scene, args.offsets))
-            values = conditions(sol, mode, model, scene, tol)
-            return _carried(sol, values, mode, offsets, model, tol)
-
         dx, values1 = mode_rates(
             t,
             x,
@@ -410,7 +409,7 @@ def _step_end_functions(model, tol):
             model,
             tol,
             t == args.step_end,
-            at_end,
+            lambda sol: carried_of(sol, args),
             jnp.zeros_like(values),
         )
         return jnp.where(args.moving, dx, 0.0), values1
@@ -424,8 +423,8 @@ def _step_end_functions(model, tol):
     @traced_once
     def at_step_end(t, x, args):
         t, x, args = no_derivative((t, x, args))
-        sol, values = _solve_with_conditions(t, unflat(x), args.mode, args.scene, model, tol)
-        return _carried(sol, values, args.mode, args.offsets, model, tol)
+        sol = solve_mode(t, unit_state(unflat(x)), args.mode, args.scene, model, tol)
+        return carried_of(sol, args)
 
     return rates, at_step_end, condition
 
