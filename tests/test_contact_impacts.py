@@ -11,6 +11,7 @@ from programs import persistent
 
 import jaxrb
 from jaxrb.analytic import ball_apex_heights, ball_height, ball_impact_times, ball_rest_time
+from jaxrb.contact._driver import dependent_from_start
 from jaxrb.contact._features import contact_model
 from jaxrb.contact._impact_law import FRICTIONLESS, HELD, NEWTON, PLASTIC, VARIANTS
 from jaxrb.contact._modes import flight_mode, geometry
@@ -153,6 +154,36 @@ def test_gradients_across_impact_wrt_friction_drag_inertia(mu):
         assert abs(jac[2, 0]) > 0.1
     else:
         assert abs(jac[2, 0]) < 1e-6 and abs(jac[2, 2]) > 1.0
+
+
+def test_the_segment_loops_first_carry_depends_on_the_inputs_with_its_values_unchanged():
+    """`dependent_from_start`: the floats of the loop's first carry depend on every float of
+    the scene and the initial state from the start (batched over a floor parameter they carry
+    the batch axis: `jax.vmap` with `out_axes=None` refuses them), their values unchanged to
+    the bit (-0, infinities, NaN); integers are left alone."""
+    body = jaxrb.RigidBody(1.0, shape=jaxrb.Sphere(R_BALL))
+    state0 = jaxrb.make_state(pos=(0.0, 0.0, 0.5), vel=(-1.0, 0.0, 0.0))
+    tree = dict(
+        x=jnp.array([-0.0, 0.0, 1.5, -2.5, jnp.inf, -jnp.inf, jnp.nan]),
+        count=jnp.array([3, -1], jnp.int32),
+    )
+
+    def seeded(e):
+        scene = jaxrb.Scene(body, forces=(jaxrb.Gravity(),), floor=jaxrb.Floor(e, 0.3))
+        return dependent_from_start(scene, state0)(tree)
+
+    es = jnp.array([0.2, 0.5, 0.9])
+    out = jax.vmap(seeded)(es)
+    bits = np.asarray(tree["x"]).view(np.uint64)
+    for row in np.asarray(out["x"]):
+        np.testing.assert_array_equal(row.view(np.uint64), bits)
+    np.testing.assert_array_equal(np.asarray(out["count"]), np.tile(tree["count"], (3, 1)))
+    assert out["count"].dtype == jnp.int32
+    with pytest.raises(ValueError, match="out_axes"):
+        jax.vmap(lambda e: seeded(e)["x"], out_axes=None)(es)
+    jax.vmap(lambda e: seeded(e)["count"], out_axes=None)(es)  # no batch axis: accepted
+    # and the derivative of a seeded float is that of the float itself (here none)
+    assert float(jax.grad(lambda e: jnp.sum(seeded(e)["x"][:4]))(0.5)) == 0.0
 
 
 # ------------------------------------------------------------------ impact law

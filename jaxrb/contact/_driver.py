@@ -135,6 +135,34 @@ def simulate_contact(scene, state0, ts, settings, *, throw, options, members=Fal
     return traj
 
 
+def dependent_from_start(scene, state0):
+    """A function that subtracts from every float of a tree a zero depending on every float
+    of `scene` and `state0` (their finite values times 0): the values, and any derivative,
+    are unchanged, to the bit (-0 and inf too). For the first carry of the loop over
+    segments: its time, state and records depend on those inputs once a segment has run,
+    and with this from the start. JAX differentiates (forward mode, and reverse mode, which
+    starts from it) and batches (`jax.vmap`, `jax.jacfwd`) a while loop by transforming its
+    body again until the set of carries with derivatives (or a batch axis) stops growing,
+    and with each pass the loops nested inside it; given the set at the start, one pass
+    does. Not the save times (an input of their own) nor the mode (no derivative flows into
+    its directions; one seeded there would be carried through every solve)."""
+    leaves = [
+        x
+        for x in jax.tree.leaves((scene, state0))
+        if isinstance(x, jax.Array) and jnp.issubdtype(x.dtype, jnp.floating)
+    ]
+    # +0 exactly (each term a finite |x| times 0), subtracted: x - 0 is x, -0 and inf too
+    zero = sum(jnp.sum(0.0 * jnp.abs(jnp.where(jnp.isfinite(x), x, 0.0))) for x in leaves)
+
+    def seeded(tree):
+        return jax.tree.map(
+            lambda x: x - zero.astype(x.dtype) if jnp.issubdtype(x.dtype, jnp.floating) else x,
+            tree,
+        )
+
+    return seeded
+
+
 class _Segment(eqx.Module):
     """The arguments of a segment's right-hand side, event function and step limit: the
     scene, the segment's mode, the shifts of its conditions, and whether the body moves
@@ -198,16 +226,17 @@ class ContactProgram(eqx.Module):
             event_sliding=jnp.zeros(options.max_events + 1, bool),
             event_inconsistent=jnp.zeros(options.max_events + 1, bool),
         )
+        seeded = dependent_from_start(scene, state0)
         return dict(
             ts=ts,
-            t=ts[0],
-            y=y0,
+            t=seeded(ts[0]),
+            y=seeded(y0),
             mode=flight_mode(dtype),
             trigger=jnp.array(-1),
             done=result != RESULTS.successful,
-            impacts=empty_impacts(options.max_impacts, dtype),
-            log=log0,
-            buffer=jax.tree.map(lambda x: jnp.zeros((T,) + x.shape, dtype), y0),
+            impacts=seeded(empty_impacts(options.max_impacts, dtype)),
+            log=seeded(log0),
+            buffer=seeded(jax.tree.map(lambda x: jnp.zeros((T,) + x.shape, dtype), y0)),
             kind=jnp.zeros(T, jnp.int32),
             sliding=jnp.zeros(T, bool),
             filled=jnp.zeros(T, bool),
