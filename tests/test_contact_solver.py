@@ -22,6 +22,7 @@ from jaxrb.contact._modes import (
     face_twist,
     flight_mode,
     geometry,
+    held_and_sliding,
     sliding_solver,
     solve_mode,
 )
@@ -77,7 +78,16 @@ def _compare(which, key_data):
         direct = solve_mode(0.0, state, mode, scene, model, TOL, hats=h, geom=geom)
         zero = jnp.zeros(3, jnp.float64)
         plain = solve_mode(0.0, state, mode, scene, model, TOL, hats=(zero,) * 3, geom=geom)
-        return [(s.lam, s.acc, s.alpha, s.rows.C) for s in (fast, direct)], plain.lam
+        # the mode made to stick, built beside the sliding solver, against its direct solve
+        held, beside = held_and_sliding(0.0, state, mode, scene, model, TOL, geom)
+        stuck = eqx.tree_at(lambda m: m.stick, mode, jnp.ones(2, bool))
+        held_direct = solve_mode(0.0, state, stuck, scene, model, TOL, hats=(zero,) * 3, geom=geom)
+        pairs = [
+            [(s.lam, s.acc, s.alpha, s.rows.C) for s in (fast, direct)],
+            [(s.lam, s.acc, s.alpha, s.rows.J) for s in (held, held_direct)],
+            [(s.lam, s.acc, s.alpha) for s in (beside(h), fast)],
+        ]
+        return pairs, plain.lam
 
     return jax.vmap(one)(jnp.arange(len(table)), hats)
 
@@ -85,15 +95,19 @@ def _compare(which, key_data):
 def test_sliding_solver_equals_the_direct_solve():
     """For every candidate mode of a box, a coin and a d12 (stick and slide, points, pairs,
     faces), the Woodbury update gives the direct solve's contact forces and accelerations
-    to roundoff (1e-9 of their scale)."""
+    to roundoff (1e-9 of their scale); so does the mode made to stick that the mode choice
+    builds beside the sliding solver (`held_and_sliding`), whose sliding solver is the
+    one built alone."""
     key = jax.random.key(3)
     for which in range(len(SHAPES)):
         key, sub = jax.random.split(key)
-        (fast, direct), plain = _compare(which, jax.random.key_data(sub))
-        for a, b in zip(fast, direct, strict=True):
-            a, b = np.asarray(a), np.asarray(b)
-            scale = np.max(np.abs(b)) + 1e-300
-            np.testing.assert_allclose(a, b, rtol=0, atol=1e-9 * scale)
+        pairs, plain = _compare(which, jax.random.key_data(sub))
+        direct = pairs[0][1]
+        for one, other in pairs:
+            for a, b in zip(one, other, strict=True):
+                a, b = np.asarray(a), np.asarray(b)
+                scale = np.max(np.abs(b)) + 1e-300
+                np.testing.assert_allclose(a, b, rtol=0, atol=1e-9 * scale)
         # the directions matter: some candidates' forces differ from those without friction
         change = np.max(np.abs(np.asarray(direct[0]) - np.asarray(plain)))
         assert change > 1e-2 * np.max(np.abs(np.asarray(plain)))

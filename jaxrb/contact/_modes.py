@@ -831,31 +831,53 @@ def column_rates(geom: Geometry, mode: Mode, mu, model) -> jax.Array:
 
 def sliding_solver(t, state: State, mode: Mode, scene, model, tol, geom) -> SlidingSolver:
     """The `SlidingSolver` of `mode` at `state` (unit quaternion), `geom` its geometry."""
+    one = jax.tree.map(lambda x: x[None], mode)
+    return tree_index(sliding_solvers(t, state, one, scene, model, tol, geom), 0)
+
+
+def held_and_sliding(t, state: State, mode: Mode, scene, model, tol, geom):
+    """(the solution of `mode` made to stick at both of its points, or its face, with no
+    sliding direction; the `SlidingSolver` of `mode`) at `state` (unit quaternion), `geom`
+    its geometry: both built side by side (`sliding_solvers`), so that the compiled program
+    holds the rows and their solve once for the two."""
+    held = eqx.tree_at(lambda m: m.stick, mode, jnp.ones(2, bool))
+    both = jax.tree.map(lambda x, y: jnp.stack([x, y]), held, mode)
+    solvers = sliding_solvers(t, state, both, scene, model, tol, geom)
+    zero = jnp.zeros(3, state.pos.dtype)
+    return tree_index(solvers, 0)((zero, zero, zero)), tree_index(solvers, 1)
+
+
+def sliding_solvers(t, state: State, modes: Mode, scene, model, tol, geom) -> SlidingSolver:
+    """The `SlidingSolver`s of `modes` (each field with a leading axis, as the result's) at
+    `state` (unit quaternion), `geom` its geometry."""
     body = scene.body
     dtype = state.pos.dtype
     mu, _, _ = point_coefficients(scene, model)
     blend = tol.slip_blend
-
-    zero = jnp.zeros((3, 3), dtype)
-    rows = mode_rows(state, geom, mode, (zero[0], zero[1], zero[2]), mu, scene, model, blend)
-    d_columns = column_rates(geom, mode, mu, model)
-    minv = lambda C: inverse_mass_columns(body, geom.R, C)  # noqa: E731 (linear in C)
-    minv_C = minv(rows.C)
-    d_minv = jax.vmap(jax.vmap(minv))(d_columns)
-    both = rows.mask[:, None] & rows.mask[None, :]
-    A0 = jnp.where(both, rows.J @ minv_C.T, jnp.eye(NUM_ROWS, dtype=dtype))
-    # the rates of A's columns 0 and 1 (the only ones the directions move)
-    d_A = jnp.einsum("ix,jckx->jcik", rows.J, d_minv[:, :, :2])  # (3, 3, 6, 2)
-    d_A = jnp.where(both[None, None, :, :2], d_A, 0.0)
     acc0, omega_dot0 = accelerations(t, state, scene)
     u0_dot = jnp.concatenate([acc0, geom.R @ omega_dot0])
     beta = jnp.asarray(tol.stabilisation, dtype)
-    stab = jnp.where(rows.holonomic, 2 * beta * rows.vel + beta**2 * rows.pos, beta * rows.vel)
-    rhs = jnp.where(rows.mask, -(rows.J @ u0_dot + rows.bias + stab), 0.0)
-    right = jnp.concatenate([rhs[:, None], jnp.moveaxis(d_A, 2, 0).reshape(NUM_ROWS, 18)], 1)
-    X = small_solve(A0, right)  # (6, 19)
-    d_lam = jnp.moveaxis(X[:, 1:].reshape(NUM_ROWS, 3, 3, 2), 0, 2)
-    return SlidingSolver(rows, d_columns, minv_C, d_minv, X[:, 0], d_lam, u0_dot, geom)
+
+    def build(mode):
+        zero = jnp.zeros((3, 3), dtype)
+        rows = mode_rows(state, geom, mode, (zero[0], zero[1], zero[2]), mu, scene, model, blend)
+        d_columns = column_rates(geom, mode, mu, model)
+        minv = lambda C: inverse_mass_columns(body, geom.R, C)  # noqa: E731 (linear in C)
+        minv_C = minv(rows.C)
+        d_minv = jax.vmap(jax.vmap(minv))(d_columns)
+        both = rows.mask[:, None] & rows.mask[None, :]
+        A0 = jnp.where(both, rows.J @ minv_C.T, jnp.eye(NUM_ROWS, dtype=dtype))
+        # the rates of A's columns 0 and 1 (the only ones the directions move)
+        d_A = jnp.einsum("ix,jckx->jcik", rows.J, d_minv[:, :, :2])  # (3, 3, 6, 2)
+        d_A = jnp.where(both[None, None, :, :2], d_A, 0.0)
+        stab = jnp.where(rows.holonomic, 2 * beta * rows.vel + beta**2 * rows.pos, beta * rows.vel)
+        rhs = jnp.where(rows.mask, -(rows.J @ u0_dot + rows.bias + stab), 0.0)
+        right = jnp.concatenate([rhs[:, None], jnp.moveaxis(d_A, 2, 0).reshape(NUM_ROWS, 18)], 1)
+        X = small_solve(A0, right)  # (6, 19)
+        d_lam = jnp.moveaxis(X[:, 1:].reshape(NUM_ROWS, 3, 3, 2), 0, 2)
+        return SlidingSolver(rows, d_columns, minv_C, d_minv, X[:, 0], d_lam, u0_dot, geom)
+
+    return jax.vmap(build)(modes)
 
 
 def no_derivative(tree):

@@ -22,6 +22,7 @@ from ._modes import (
     inverse_mass_columns,
     mode_rows,
     on_support,
+    tree_where,
 )
 
 
@@ -44,28 +45,39 @@ def _zero_hats(dtype):
     return z, z, z
 
 
-def project_positions(state: State, mode, scene, model, iterations: int = 2) -> State:
-    """Active gaps and a face's tilt brought to zero."""
+def project(state: State, mode, scene, model, slip_stop, iterations: int = 2) -> State:
+    """The state projected onto `mode`'s constraints: `iterations` Gauss-Newton steps that
+    bring the active gaps and a face's tilt to zero, then one step that brings to zero the
+    normal velocities of the active contacts and the slips of those that stick or start to
+    slide from rest (slip below `slip_stop`, m/s). One loop of `iterations` + 1 passes: the
+    compiled program holds the geometry, the rows and the correction once."""
     dtype = state.pos.dtype
 
-    def step(_, state):  # a loop: the compiled program holds one step, not `iterations`
+    def step(k, state):
         geom = geometry(state, scene, model, mode.seed, mode.side)
         rows = mode_rows(state, geom, mode, _zero_hats(dtype), 0.0, scene, model)
-        delta = _correction(rows.J, rows.holonomic, rows.pos, scene.body, geom.R)
+        velocities = k == iterations
+        mask = jnp.where(
+            velocities, rows.mask | _still_rows(state, geom, mode, model, slip_stop), rows.holonomic
+        )
+        delta = _correction(
+            rows.J, mask, jnp.where(velocities, rows.vel, rows.pos), scene.body, geom.R
+        )
         turn = delta[3:]
         angle = _safe_norm(turn)
         quat = quat_normalize(quat_multiply(axis_angle_to_quat(turn, angle), state.quat))
-        return State(state.pos + delta[:3], quat, state.vel, state.omega)
+        moved = State(state.pos + delta[:3], quat, state.vel, state.omega)
+        w = geom.w + delta[3:]
+        pushed = State(state.pos, state.quat, state.vel + delta[:3], geom.R.T @ w)
+        return tree_where(velocities, pushed, moved)
 
-    return jax.lax.fori_loop(0, iterations, step, state)
+    return jax.lax.fori_loop(0, iterations + 1, step, state)
 
 
-def project_velocities(state: State, mode, scene, model, slip_stop) -> State:
-    """Normal velocities of the active contacts, and the slips of those that stick or start
-    to slide from rest (slip below `slip_stop`), brought to zero."""
-    dtype = state.pos.dtype
-    geom = geometry(state, scene, model, mode.seed, mode.side)
-    rows = mode_rows(state, geom, mode, _zero_hats(dtype), 0.0, scene, model)
+def _still_rows(state, geom, mode, model, slip_stop):
+    """The tangential rows (6,) the velocity projection adds to the mode's: those of the
+    points (or the face) whose slip is below `slip_stop` (m/s): sticking, or starting to
+    slide from rest."""
     kind = mode.kind
     still_a = _safe_norm(geom.slip[mode.a]) <= slip_stop
     still_b = _safe_norm(geom.slip[mode.b]) <= slip_stop
@@ -73,7 +85,7 @@ def project_velocities(state: State, mode, scene, model, slip_stop) -> State:
     still_f = _safe_norm(face_twist(state, geom, model, mode.face)[0]) <= slip_stop
     still_f = still_f & ~on_support(mode)
     point_like = (kind == POINT) | (kind == PAIR)
-    extra = jnp.where(
+    return jnp.where(
         kind == FACE,
         jnp.array([False, False, False, True, True, True]) & still_f,
         jnp.stack(
@@ -87,6 +99,3 @@ def project_velocities(state: State, mode, scene, model, slip_stop) -> State:
             ]
         ),
     )
-    delta = _correction(rows.J, rows.mask | extra, rows.vel, scene.body, geom.R)
-    w = geom.w + delta[3:]
-    return State(state.pos, state.quat, state.vel + delta[:3], geom.R.T @ w)

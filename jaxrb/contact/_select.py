@@ -23,12 +23,11 @@ from ._modes import (
     active_points,
     cross,
     face_twist,
+    held_and_sliding,
     inverse_mass_columns,
     on_support,
     only_where_needed,
     point_coefficients,
-    sliding_solver,
-    solve_mode,
     tree_index,
     tree_where,
     tree_zeros,
@@ -98,18 +97,25 @@ def newton_directions(measure, seeds, dtype):
     h = jnp.sqrt(jnp.finfo(dtype).eps)
     probe = jnp.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]], dtype) * h
 
-    def newton(_, x):
-        r, _, _ = jax.vmap(measure)(x + probe)
+    def newton(_, carry):  # (x, the x before it, what was measured there)
+        x = carry[0]
+        r, along, admissible = jax.vmap(measure)(x + probe)  # probe 0: at x itself
         J = (r[1:] - r[0]).T / h  # J[:, k] = dr / dx_k
         JtJ, g = J.T @ J, J.T @ r[0]
         damping = 1e-10 * jnp.trace(JtJ) + jnp.finfo(dtype).tiny
         a, b, d = JtJ[0, 0] + damping, JtJ[0, 1], JtJ[1, 1] + damping
         step = -jnp.stack([d * g[0] - b * g[1], a * g[1] - b * g[0]]) / (a * d - b * b)
         size = jnp.max(jnp.abs(step))
-        return x + step * jnp.minimum(1.0, MAX_NEWTON_STEP / jnp.maximum(size, 1e-300))
+        x_next = x + step * jnp.minimum(1.0, MAX_NEWTON_STEP / jnp.maximum(size, 1e-300))
+        return x_next, x, (r[0], along[0], admissible[0])
 
-    xs = jax.vmap(lambda x0: jax.lax.fori_loop(0, NEWTON_ITERATIONS, newton, x0))(seeds)
-    r, along, admissible = jax.vmap(measure)(xs)
+    def search(x0):  # a last pass measures the last iterate: the program holds one measure
+        shapes = jax.eval_shape(measure, x0)
+        unmeasured = tuple(jnp.zeros(m.shape, m.dtype) for m in shapes)
+        _, x, measured = jax.lax.fori_loop(0, NEWTON_ITERATIONS + 1, newton, (x0, x0, unmeasured))
+        return x, measured
+
+    xs, (r, along, admissible) = jax.vmap(search)(seeds)
     size = jnp.max(jnp.abs(r), axis=1)
     scale = jnp.max(jnp.abs(along), axis=1) + 1.0
     good = admissible & jnp.all(along >= 0, axis=1)
@@ -117,10 +123,10 @@ def newton_directions(measure, seeds, dtype):
     return xs[best], good[best] & (size[best] <= 1e-6 * scale[best])
 
 
-def point_sliding_direction(b, K, mu, n, t1, t2):
-    """`scan_direction` for a single point contact at rest, in closed form: with the contact
-    point's acceleration a = b + K f under the contact force f = lambda_n (n - mu s),
-    lambda_n from n . a = 0 (admissible: lambda_n >= 0). `b` (3,) is the point's
+def point_slip_measure(b, K, mu, n):
+    """The `measure` of `scan_direction` for a single point contact at rest, in closed form:
+    with the contact point's acceleration a = b + K f under the contact force f = lambda_n
+    (n - mu s), lambda_n from n . a = 0 (admissible: lambda_n >= 0). `b` (3,) is the point's
     acceleration without contact force, `K` (3, 3) its Delassus matrix (world)."""
 
     def measure(s):
@@ -130,7 +136,7 @@ def point_sliding_direction(b, K, mu, n, t1, t2):
         a = b + lam * (K @ force_dir)
         return a - (a @ n) * n, lam >= 0
 
-    return scan_direction(measure, n, t1, t2, b.dtype)
+    return measure
 
 
 def stabilisation_offsets(geom, beta):
@@ -195,26 +201,14 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
     rest_f = (mode.kind == FACE) & ~mode.stick[0] & ~support
     rest_f = rest_f & (jnp.linalg.norm(twist) <= tol.slip_stop)
 
-    # the mode's solution for any sliding directions, at the cost of a 2 x 2 solve each
-    solve = sliding_solver(t, state, mode, scene, model, tol, geom)
+    # the mode made to stick, and its solution for any sliding directions (at the cost of a
+    # 2 x 2 solve each), built side by side. Sliding from rest starts opposite to the
+    # friction that sticking would need (exactly so at the cone's boundary, where the slip's
+    # acceleration vanishes)
+    held, solve = held_and_sliding(t, state, mode, scene, model, tol, geom)
     # `relative_accelerations`, its offsets computed once: the searches below solve many times
     offsets = stabilisation_offsets(geom, beta)
     relative = lambda sol: sol.point_accelerations() + offsets  # noqa: E731
-
-    # sliding from rest starts opposite to the friction that sticking would need (exactly so
-    # at the cone's boundary, where the slip's acceleration vanishes)
-    zero_hats = (zero3, zero3, zero3)
-    held = solve_mode(
-        t,
-        state,
-        eqx.tree_at(lambda m: m.stick, mode, jnp.ones(2, bool)),
-        scene,
-        model,
-        tol,
-        hats=zero_hats,
-        geom=geom,
-        supports=False,  # made to stick: never a support
-    )
     lam, d = held.lam, held.rows.J[:, :3]
     need_a = lam[2] * d[2] + lam[3] * d[3]
     need_b = lam[4] * d[4] + lam[5] * d[5]
@@ -230,24 +224,46 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
     u_dot = jnp.concatenate([held.acc, held.alpha])
     bp = frame.T @ (Jp @ u_dot - Kp @ lam[keep] + rows.bias[keep]) + offsets[mode.a]
     mu, _, _ = point_coefficients(scene, model)
-    point_dir, found = only_where_needed(
-        live & (mode.kind == POINT) & rest_a,
-        lambda: point_sliding_direction(bp, frame.T @ Kp @ frame, mu[mode.a], *frame),
+
+    def seeds(need_a):
+        return (
+            jnp.where(rest_a, unit_or(-need_a, zero3), unit_or(geom.slip[mode.a], zero3)),
+            jnp.where(rest_b, unit_or(-need_b, zero3), unit_or(geom.slip[mode.b], zero3)),
+            jnp.where(rest_f, unit_or(-need_f, zero3), unit_or(twist, zero3)),
+        )
+
+    # one scan of directions (the program holds it once) for a single point sliding from
+    # rest, its slip's acceleration in closed form, and for a pair's end starting from rest
+    # while the other end slides, by the sliding solver with that end's direction fixed
+    # (exact, as for a single point); the others: fixed point below, Newton for a pair
+    hats0 = seeds(need_a)
+    point = (mode.kind == POINT) & rest_a
+    pair = mode.kind == PAIR
+    scan_b = pair & rest_b & ~rest_a
+    point_measure = point_slip_measure(bp, frame.T @ Kp @ frame, mu[mode.a], frame[0])
+
+    def measure(s):
+        if not model.pairs:  # a shape without pairs (a ball on one surface)
+            return point_measure(s)
+        hats = (jnp.where(scan_b, hats0[0], s), jnp.where(scan_b, s, hats0[1]), hats0[2])
+        sol = solve(hats)
+        acc = geom.tangential(relative(sol))[jnp.where(scan_b, mode.b, mode.a)]
+        end = (acc, (sol.lam[0] >= 0) & (sol.lam[1] >= 0))
+        return tree_where(point, point_measure(s), end)
+
+    scan_dir, found = only_where_needed(
+        live & (point | (pair & (rest_a != rest_b))),
+        lambda: scan_direction(measure, *geom.frame_of(jnp.where(scan_b, mode.b, mode.a)), dtype),
         lambda: (zero3, jnp.array(False)),
     )
     # (none found: at the cone's edge the slip's acceleration vanishes along the direction
-    # opposite to the friction sticking needs, which the seed below already is)
-    need_a = jnp.where((mode.kind == POINT) & found, -point_dir, need_a)
-    hats0 = (
-        jnp.where(rest_a, unit_or(-need_a, zero3), unit_or(geom.slip[mode.a], zero3)),
-        jnp.where(rest_b, unit_or(-need_b, zero3), unit_or(geom.slip[mode.b], zero3)),
-        jnp.where(rest_f, unit_or(-need_f, zero3), unit_or(twist, zero3)),
-    )
+    # opposite to the friction sticking needs, which the seed already is)
+    hats0 = seeds(jnp.where((mode.kind == POINT) & found, -scan_dir, need_a))
     # a shape without pairs (a ball on one surface) has no pair modes: no pair searches
     exact_a = exact_b = exact_pair = jnp.array(False)
     if model.pairs:
         hats0, exact_a, exact_b, exact_pair = _pair_directions(
-            geom, mode, hats0, rest_a, rest_b, live, solve, relative, dtype
+            geom, mode, hats0, rest_a, rest_b, (scan_dir, found), live, solve, relative, dtype
         )
     small = 1e-6 * (1.0 + _safe_norm(held.acc))  # slip accelerations below this: keep the seed
 
@@ -328,36 +344,16 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
     return chosen, jnp.concatenate([gap_margin, force, align]), still, paradox
 
 
-def _pair_directions(geom, mode, hats0, rest_a, rest_b, live, solve, relative, dtype):
+def _pair_directions(geom, mode, hats0, rest_a, rest_b, scanned, live, solve, relative, dtype):
     """The sliding directions from rest of a pair's ends (`_candidate`): one end sliding,
-    the other from rest, by a scan; both from rest, by Newton. `solve(hats)` solves the
-    candidate for given directions, `relative(sol)` its point accelerations relative to
-    the stabilisation's targets. Returns the directions and which are exact (a, b,
-    both)."""
-    zero3 = jnp.zeros(3, dtype)
-    # a pair with one end sliding and the other starting from rest: that end's direction
-    # by a scan with the sliding end's direction fixed (exact, as for a single point)
+    the other from rest, from the candidate's scan (`scanned`: its direction and whether
+    it found one); both from rest, by Newton. `solve(hats)` solves the candidate for given
+    directions, `relative(sol)` its point accelerations relative to the stabilisation's
+    targets. Returns the directions and which are exact (a, b, both)."""
     pair = mode.kind == PAIR
-    scan_b = pair & rest_b & ~rest_a
-
-    def end_measure(end, s):
-        hats = (jnp.where(end == 0, s, hats0[0]), jnp.where(end == 0, hats0[1], s), hats0[2])
-        sol = solve(hats)
-        acc = geom.tangential(relative(sol))
-        return acc[jnp.where(end == 0, mode.a, mode.b)], (sol.lam[0] >= 0) & (sol.lam[1] >= 0)
-
-    end = jnp.where(scan_b, 1, 0)
-    end_dir, end_found = only_where_needed(
-        live & pair & (rest_a != rest_b),
-        lambda: scan_direction(
-            lambda s: end_measure(end, s),
-            *geom.frame_of(jnp.where(scan_b, mode.b, mode.a)),
-            dtype,
-        ),
-        lambda: (zero3, jnp.array(False)),
-    )
+    end_dir, end_found = scanned
     exact_a = pair & rest_a & ~rest_b & end_found
-    exact_b = scan_b & end_found
+    exact_b = pair & rest_b & ~rest_a & end_found
     hats0 = (
         jnp.where(exact_a, end_dir, hats0[0]),
         jnp.where(exact_b, end_dir, hats0[1]),

@@ -38,7 +38,7 @@ from ._modes import (
     tree_zeros,
     unit_state,
 )
-from ._projection import project_positions, project_velocities
+from ._projection import project
 from ._select import select_mode
 
 # the order in which `at_event` solves the impact variants: each one's need is known from
@@ -219,8 +219,7 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol, live=True) -> 
         live,
     )
     new_mode = choice.mode
-    state = project_positions(state, new_mode, scene, model)
-    state = project_velocities(state, new_mode, scene, model, tol.slip_stop)
+    state = project(state, new_mode, scene, model, tol.slip_stop)
     energy1 = energy(scene, state)
     return EventOutcome(
         state=state,
