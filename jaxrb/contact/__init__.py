@@ -8,6 +8,9 @@ The formulation is in docs/contact.md. One concern per file:
 - `_features.py`: the per-shape contact models (points, pairs, faces), in one table;
 - `_modes.py`: modes, constraint rows and the constrained Newton-Euler equations;
 - `_events.py`: the conditions that end a segment;
+- `_step_end.py`, `_step_limit.py`: the event function and step limit carried at step ends,
+  and the steps cut to that limit;
+- `_event_root.py`: the event's time on the last step's dense output, and its cause;
 - `_select.py`: the next mode at an event (enumeration of candidate modes);
 - `_impact_law.py`: Newton's restitution with Coulomb friction at all touching points;
 - `_projection.py`: positions and velocities projected onto the active constraints;

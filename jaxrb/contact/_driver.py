@@ -2,10 +2,11 @@
 maps at events (docs/contact.md).
 
 Each segment is one `diffrax.diffeqsolve` of the mode's right-hand side that stops at the
-first zero of the mode's event function (root found on the dense output). The segment loop is
-an `equinox.internal.while_loop` bounded by `max_events`: it stops once every member of a
-batch has reached the end time, reverse-differentiates (checkpointed) and, with
-`diffrax.ForwardMode`, forward-differentiates. Gradients include the shift of each event time.
+first zero of the mode's event function (root found on the dense output of the step diffrax
+stops after, `_event_root.py`). The segment loop is an `equinox.internal.while_loop` bounded
+by `max_events`: it stops once every member of a batch has reached the end time,
+reverse-differentiates (checkpointed) and, with `diffrax.ForwardMode`, forward-differentiates.
+Gradients include the shift of each event time.
 """
 
 import diffrax as dfx
@@ -26,8 +27,8 @@ from .._solve import checks_without_host_callbacks
 from .._solver_settings import SolverSettings
 from .._state import State
 from .._trajectory import Trajectory
+from ._event_root import EventTime, event_root
 from ._events import (
-    EventTime,
     cause_of,
     condition_tolerances,
     conditions,
@@ -48,7 +49,7 @@ from ._modes import (
 )
 from ._options import ContactOptions
 from ._record import ContactLog, add_impact, empty_impacts
-from ._step_end import TRIGGER, CarryingSolver, carried_event_value
+from ._step_end import CarryingSolver, carried_event_value, last_step
 from ._step_limit import limited, step_limit_of
 from ._transition import at_event
 
@@ -316,14 +317,16 @@ class ContactProgram(eqx.Module):
         t0 = jnp.where(done, t_end - idle, t0)
         settings = self.settings
         args = _Segment(scene, mode, offsets, ~done, jnp.array(jnp.nan, ts.dtype))
-        rates, at_step_end, condition = _step_end_functions(model, tol)
+        rates, at_step_end, shifted_conditions = _step_end_functions(model, tol)
+        solver = CarryingSolver(settings.solver, args, at_step_end, _Segment.marked)
         state_only = lambda t, y, args: y[0]  # noqa: E731
-        # at an event the end state is interpolated at the root: beside it the event
-        # function and the index of the condition that ended the segment (`_step_end.py`)
+        # diffrax stops at the end of the step in which the event function fell to zero; the
+        # event is located on that step's dense output, kept in the solver's state
+        # (`_event_root.py`)
         with checks_without_host_callbacks():
             sol = dfx.diffeqsolve(
                 dfx.ODETerm(rates),
-                CarryingSolver(settings.solver, args, at_step_end, condition, _Segment.marked),
+                solver,
                 t0=t0,
                 t1=t_end,
                 dt0=settings.dt0,
@@ -332,20 +335,26 @@ class ContactProgram(eqx.Module):
                 saveat=dfx.SaveAt(
                     subs=[
                         dfx.SubSaveAt(ts=jnp.clip(ts, t0, t_end), fn=state_only),
-                        dfx.SubSaveAt(t1=True),
-                    ]
+                        dfx.SubSaveAt(t1=True, fn=state_only),
+                    ],
+                    solver_state=True,
                 ),
                 stepsize_controller=settings.controller,
                 adjoint=settings.adjoint,
                 max_steps=settings.max_steps,
-                event=_event(tol),
+                event=dfx.Event(carried_event_value, direction=False),
                 throw=False,
             )
-        t_stop = sol.ts[1][0]
-        x_stop, carried_stop = jax.tree.map(lambda a: a[0], sol.ys[1])
-        y_stop = unflat(x_stop)
         ev = jnp.asarray(sol.event_mask) & ~done
+        step = last_step(solver, sol.solver_state)
+        t_root, x_root, trigger, located = event_root(
+            step, shifted_conditions, args, ev, EventTime(rtol=tol.event, atol=tol.event)
+        )
+        t_stop = jnp.where(ev, t_root, sol.ts[1][0])
+        y_stop = unflat(jnp.where(ev, x_root, sol.ys[1][0]))
         res = RESULTS.promote(sol.result)
+        located = RESULTS.promote(located)
+        res = RESULTS.where(located == RESULTS.successful, res, located)
         failed = ~done & (res != RESULTS.successful) & (res != RESULTS.event_occurred)
         filled = carry["filled"]
         owned = ~filled & ~done & (ts >= t0) & ((ts < t_stop) | (~ev & (ts <= t_stop)))
@@ -353,7 +362,7 @@ class ContactProgram(eqx.Module):
         def keep(buf, new):
             return jnp.where(owned.reshape((T,) + (1,) * (buf.ndim - 1)), new, buf)
 
-        trigger = carried_stop[TRIGGER].astype(carry["trigger"].dtype)  # at an event only
+        trigger = trigger.astype(carry["trigger"].dtype)  # at an event only
         log["events"] = log["events"] + ev.astype(jnp.int32)
         result = carry["result"]
         result = RESULTS.where(failed & (result == RESULTS.successful), res, result)
@@ -414,13 +423,13 @@ class ContactProgram(eqx.Module):
 
 
 def _step_end_functions(model, tol):
-    """(rates, at_step_end, condition) of a segment's `CarryingSolver` (`_step_end.py`): the
-    right-hand side on y = (x, [c, h]), which returns beside the rates of x the event
-    function and the step limit at a step's end (`args.step_end`), from the same solve of
-    the mode, with no derivative; the same two values from a solve of their own, for
-    solvers whose last stage is not the step's end; and, for the root find, the event
-    function, differentiable, with the index of the smallest shifted condition (the
-    trigger, should the segment end there)."""
+    """(rates, at_step_end, shifted_conditions) of a segment's `CarryingSolver`
+    (`_step_end.py`) and its event's root find (`_event_root.py`): the right-hand side on
+    y = (x, [c, h]), which returns beside the rates of x the event function and the step
+    limit at a step's end (`args.step_end`), from the same solve of the mode, with no
+    derivative; the same two values from a solve of their own, for solvers whose last stage
+    is not the step's end; and, for the root find, the shifted conditions at (t, x),
+    differentiable (their least is the event function, its index the trigger)."""
 
     def carried_of(sol, args):  # [c, h] of a solution in the segment (no derivative)
         sol, mode, scene, offsets = no_derivative((sol, args.mode, args.scene, args.offsets))
@@ -444,10 +453,9 @@ def _step_end_functions(model, tol):
         return jnp.where(args.moving, dx, 0.0), values1
 
     @traced_once
-    def condition(t, x, args):  # x: the segment's flat state
+    def shifted_conditions(t, x, args):  # x: the segment's flat state
         _, values = _solve_with_conditions(t, unflat(x), args.mode, args.scene, model, tol)
-        shifted = values + args.offsets
-        return jnp.stack([jnp.min(shifted), jnp.argmin(shifted).astype(shifted.dtype)])
+        return values + args.offsets
 
     @traced_once
     def at_step_end(t, x, args):
@@ -455,7 +463,7 @@ def _step_end_functions(model, tol):
         sol = solve_mode(t, unit_state(unflat(x)), args.mode, args.scene, model, tol)
         return carried_of(sol, args)
 
-    return rates, at_step_end, condition
+    return rates, at_step_end, shifted_conditions
 
 
 def _solve_with_conditions(t, y, mode, scene, model, tol):
@@ -470,17 +478,6 @@ def _carried(sol, values, mode, offsets, model, tol):
     function (the smallest condition `values` shifted by `offsets`) and the step limit (s)
     at the state of the mode's solution `sol`."""
     return jnp.stack([jnp.min(values + offsets), step_limit_of(sol, mode, offsets, model, tol)])
-
-
-def _event(tol):
-    """A segment's event: the first zero of the minimum of its mode's conditions (shifted
-    by the offsets at its start), carried in the state at step ends (`_step_end.py`)."""
-    # The event fires on a down-crossing only (direction=False): the condition is positive
-    # at the bracket's lower end and at most 0 at its upper end, so the root finder knows
-    # the orientation. Detecting it, or widening the bracket, would evaluate the condition
-    # at extra places: each is another copy of the mode solve in the compiled program.
-    root_finder = EventTime(rtol=tol.event, atol=tol.event)
-    return dfx.Event(carried_event_value, root_finder=root_finder, direction=False)
 
 
 def contact_program(scene, settings, options, tol) -> ContactProgram:

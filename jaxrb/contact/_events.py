@@ -25,14 +25,9 @@ starts at its boundary (within its tolerance) is therefore shifted, and fires on
 violated by more than the tolerance.
 """
 
-from collections.abc import Callable
-from typing import ClassVar
-
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 
 from .._linalg import vecmat
 from .._quaternion import _safe_norm
@@ -201,96 +196,3 @@ def start_offsets(values0, tolerances) -> jax.Array:
     near = values0 <= tolerances
     shift = tolerances + jnp.maximum(-values0, 0.0)
     return jnp.where(near & (tolerances > 0), shift, 0.0)
-
-
-class _EventTimeState(eqx.Module):
-    lower: jax.Array  # the condition is > 0 here (before the event)
-    upper: jax.Array  # and <= 0 here
-    f_lower: jax.Array  # its values there (NaN: not evaluated yet)
-    f_upper: jax.Array
-    weights: jax.Array  # (2,): the Illinois factors of f_lower and f_upper
-    moved: jax.Array  # the end the last step moved: 1 lower, -1 upper, 0 none yet
-    widths: jax.Array  # (2,): the bracket's width after the last step and the one before
-
-
-class EventTime(optx.AbstractRootFinder):
-    """The event time in the bracket [lower, upper] (the step in which the condition fell
-    to zero or below): regula falsi with the Illinois modification, safeguarded by
-    bisection, until the bracket is below the time tolerance atol + rtol |t|; the time
-    returned is the root of the line through the final bracket's ends.
-
-    The condition is positive at `lower` and at most zero at `upper` (it fires on a
-    down-crossing only, so no sign is detected). The bracket halves while an end's value is
-    still unknown (diffrax starts at `upper`), and whenever two steps together did not halve
-    it; the false-position point is kept half a tolerance inside the bracket, so that once
-    it is that close to the root the next step closes the bracket. The returned root moves
-    continuously with the condition's values (the final bracket's midpoint would jump by up
-    to the tolerance as roundoff moves a last point, so close to the root, from one side to
-    the other). About 9 evaluations of the condition per event instead of the 26 of
-    bisection to 1e-12 s."""
-
-    rtol: float
-    atol: float
-    norm: ClassVar[Callable] = jnp.abs
-
-    def init(self, fn, y, args, options, f_struct, aux_struct, tags):
-        del fn, y, args, aux_struct, tags
-        dtype = f_struct.dtype
-        lower = jnp.asarray(options["lower"], dtype)
-        upper = jnp.asarray(options["upper"], dtype)
-        nan = jnp.array(jnp.nan, dtype)
-        width = jnp.abs(upper - lower)
-        return _EventTimeState(
-            lower,
-            upper,
-            nan,
-            nan,
-            jnp.ones(2, dtype),
-            jnp.array(0),
-            jnp.stack([width, width]).astype(dtype),
-        )
-
-    def step(self, fn, y, args, options, state, tags):
-        del options, tags
-        f, aux = fn(y, args)
-        before = f > 0
-        lower = jnp.where(before, y, state.lower)
-        upper = jnp.where(before, state.upper, y)
-        f_lower = jnp.where(before, f, state.f_lower)
-        f_upper = jnp.where(before, state.f_upper, f)
-        moved = jnp.where(before, 1, -1)
-        # Illinois: an end kept twice has its weight halved (the next point moves toward it)
-        again = moved == state.moved
-        w_lower, w_upper = state.weights[0], state.weights[1]
-        w_lower = jnp.where(before, 1.0, jnp.where(again, 0.5 * w_lower, w_lower))
-        w_upper = jnp.where(before, jnp.where(again, 0.5 * w_upper, w_upper), 1.0)
-        weights = jnp.stack([w_lower, w_upper])
-        width = upper - lower
-        margin = 0.5 * (self.atol + self.rtol * jnp.abs(y))
-        known = jnp.isfinite(f_lower) & jnp.isfinite(f_upper)
-        slow = width > 0.5 * state.widths[1]
-        false_position = _line_root(lower, upper, weights[0] * f_lower, weights[1] * f_upper)
-        false_position = jnp.clip(false_position, lower + margin, upper - margin)
-        new_y = jnp.where(known & ~slow, false_position, lower + 0.5 * width)
-        widths = jnp.stack([width, state.widths[0]])
-        state = _EventTimeState(lower, upper, f_lower, f_upper, weights, moved, widths)
-        return new_y, state, aux
-
-    def terminate(self, fn, y, args, options, state, tags):
-        del fn, args, options, tags
-        scale = self.atol + self.rtol * jnp.abs(y)
-        return jnp.abs(state.upper - state.lower) < scale, optx.RESULTS.successful
-
-    def postprocess(self, fn, y, aux, args, options, state, tags, result):
-        del fn, y, args, options, tags, result
-        lower, upper = state.lower, state.upper
-        known = jnp.isfinite(state.f_lower) & jnp.isfinite(state.f_upper)
-        root = jnp.clip(_line_root(lower, upper, state.f_lower, state.f_upper), lower, upper)
-        return jnp.where(known, root, lower + 0.5 * (upper - lower)), aux, {}
-
-
-def _line_root(lower, upper, f_lower, f_upper):
-    """The zero of the line through (lower, f_lower > 0) and (upper, f_upper <= 0)."""
-    denominator = f_upper - f_lower
-    safe = jnp.isfinite(denominator) & (denominator < 0)
-    return upper - f_upper * (upper - lower) / jnp.where(safe, denominator, -1.0)

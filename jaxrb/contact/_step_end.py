@@ -27,12 +27,16 @@ Where they come from at a step's end:
   increments and error are thrown away.
 - Otherwise (`mark` None, or another method) `at_step_end(t1, x1, args)` computes them.
 
-Between step ends, where the root find of an event evaluates the event function on the
-dense output, the interpolation (`CarryingInterpolation`) computes c from the interpolated
-x, differentiably: the event time's derivative comes from it. No step starts there, so the
-second entry holds instead what the caller's `condition` puts there; the contact segment
-puts the index of the smallest condition, so that the state diffrax returns at an event
-(interpolated at the root) says which condition ended the segment, without another solve.
+The event itself is located outside diffrax (`_event_root.py`): diffrax stops at the end of
+the step in which c fell to zero (its event without a root finder), and the solver's state
+keeps that step's span and the inner solver's dense output of x (`LastStep`), returned by
+`diffrax.SaveAt(solver_state=True)`. The root find there evaluates the event function on the
+dense output and returns, beside the time, the index of the condition that ended the
+segment, from its last evaluation: the state at the root is only interpolated, with no solve
+of the mode there. (With diffrax's own root find, the state diffrax returned at the root
+was interpolated with the event function at it, a copy of the mode's solve kept only for
+that index.) Between step ends the dense output the solver gives diffrax (for the saves)
+interpolates x alone.
 """
 
 from collections.abc import Callable
@@ -42,7 +46,6 @@ import equinox as eqx
 import jax.numpy as jnp
 
 CONDITION, LIMIT = 0, 1  # the entries of the carried values [c, h]
-TRIGGER = 1  # at an interpolated state: the entry after c (see the module docstring)
 
 
 def carried_event_value(t, y, args, **kwargs):
@@ -96,22 +99,33 @@ def reads_last_stage(solver) -> bool:
 
 
 class CarryingInterpolation(dfx.AbstractLocalInterpolation):
-    """The inner solver's dense output of x, with [c, k] = `condition(t, x, args)` computed
-    at the interpolated state (k: the caller's; the contact segment's trigger)."""
+    """The inner solver's dense output of x, as the segment's state (x, [0, 0]): the saves
+    read x alone."""
 
     t0: object
     t1: object
     inner: dfx.AbstractLocalInterpolation
-    args: object
-    condition: Callable = eqx.field(static=True)
 
     def evaluate(self, t0, t1=None, left=True):
         x = self.inner.evaluate(t0, t1, left)
         if isinstance(x, tuple):  # the inner solver's (x, w) (module docstring)
             x = x[0]
-        if t1 is not None:  # an increment: the values do not change
-            return x, jnp.zeros(2, x.dtype)
-        return x, self.condition(t0, x, self.args)
+        return x, jnp.zeros(2, x.dtype)
+
+
+class LastStep(eqx.Module):
+    """The last accepted step: its span [t0, t1] (s) and the inner solver's dense output of
+    x alone over it (`dense`, the keyword arguments of its `interpolation_cls`); before the
+    first step, x0 held over [t0, t0 + 1]."""
+
+    t0: object
+    t1: object
+    dense: dict
+
+
+def _x_part(dense_info, last_stage):
+    """The inner solver's dense output restricted to x (on (x, w) every entry is a pair)."""
+    return {k: v[0] for k, v in dense_info.items()} if last_stage else dict(dense_info)
 
 
 class CarryingSolver(dfx.AbstractWrappedSolver):
@@ -119,14 +133,12 @@ class CarryingSolver(dfx.AbstractWrappedSolver):
     (no derivative needed: diffrax takes only the sign of c there, the controller h). Where
     `mark` is given and `solver` allows it (`reads_last_stage`), [c, h] come from the last
     stage: the right-hand side, called with the arguments `mark(args, t1)`, returns them
-    beside the rates at time t1; else from `at_step_end(t1, x1, args)`. `condition(t, x,
-    args)` -> [c, k] gives the event function c at an interpolated state, and k there in
-    place of h (module docstring); `args` are the segment's arguments."""
+    beside the rates at time t1; else from `at_step_end(t1, x1, args)`. Its state is the
+    inner solver's and the `LastStep` (`last_step`); `args` are the segment's arguments."""
 
     solver: dfx.AbstractSolver
     args: object
     at_step_end: Callable = eqx.field(static=True)
-    condition: Callable = eqx.field(static=True)
     mark: Callable | None = eqx.field(static=True, default=None)
 
     @property
@@ -151,7 +163,7 @@ class CarryingSolver(dfx.AbstractWrappedSolver):
     def interpolation_cls(self):
         def build(*, t0, t1, **dense_info):
             inner = self.solver.interpolation_cls(t0=t0, t1=t1, **dense_info)
-            return CarryingInterpolation(t0, t1, inner, self.args, self.condition)
+            return CarryingInterpolation(t0, t1, inner)
 
         return build
 
@@ -164,35 +176,54 @@ class CarryingSolver(dfx.AbstractWrappedSolver):
     def error_order(self, terms):
         return self.solver.error_order(terms)
 
-    def init(self, terms, t0, t1, y0, args):
+    def _inner(self, terms, y0):
+        """The inner solver's term and state for `terms` on y0 = (x0, [c, h])."""
         x0, values0 = y0
         if self._last_stage:
-            inner_y0 = (x0, _encoded(values0))
-            return self.solver.init(_with_last_stage(terms, values0), t0, t1, inner_y0, args)
-        return self.solver.init(_on_state(terms, values0), t0, t1, x0, args)
+            return _with_last_stage(terms, values0), (x0, _encoded(values0))
+        return _on_state(terms, values0), x0
+
+    def init(self, terms, t0, t1, y0, args):
+        inner_terms, inner_y0 = self._inner(terms, y0)
+        inner = self.solver.init(inner_terms, t0, t1, inner_y0, args)
+        # before the first step: x0 held over a unit span (y0 = y1 = x0, no stages), so that
+        # its dense output is finite where it is evaluated and thrown away (a member of a
+        # batch that takes no step); the shapes from a step traced only
+        shapes = eqx.filter_eval_shape(
+            self.solver.step, inner_terms, t0, t1, inner_y0, args, inner, False
+        )[2]
+        x0 = y0[0]
+        dense = {
+            k: jnp.broadcast_to(x0, v.shape) if k in ("y0", "y1") else jnp.zeros(v.shape, v.dtype)
+            for k, v in _x_part(shapes, self._last_stage).items()
+        }
+        return inner, LastStep(t0, t0 + 1, dense)
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
-        x0, values0 = y0
+        inner_terms, inner_y0 = self._inner(terms, y0)
+        inner_state, _ = solver_state
         if self._last_stage:
-            (x1, _), xw_error, dense_info, solver_state, result = self.solver.step(
-                _with_last_stage(terms, values0),
-                t0,
-                t1,
-                (x0, _encoded(values0)),
-                self.mark(args, t1),
-                solver_state,
-                made_jump,
+            (x1, _), xw_error, dense_info, inner_state, result = self.solver.step(
+                inner_terms, t0, t1, inner_y0, self.mark(args, t1), inner_state, made_jump
             )
-            _, (_, w1) = solver_state  # the last stage's value: (rates, [c, h] encoded)
+            _, (_, w1) = inner_state  # the last stage's value: (rates, [c, h] encoded)
             values1 = _decoded(w1)
             x_error = None if xw_error is None else xw_error[0]
         else:
-            x1, x_error, dense_info, solver_state, result = self.solver.step(
-                _on_state(terms, values0), t0, t1, x0, args, solver_state, made_jump
+            x1, x_error, dense_info, inner_state, result = self.solver.step(
+                inner_terms, t0, t1, inner_y0, args, inner_state, made_jump
             )
             values1 = self.at_step_end(t1, x1, args)
         y_error = None if x_error is None else (x_error, jnp.zeros_like(values1))
-        return (x1, values1), y_error, dense_info, solver_state, result
+        last = LastStep(t0, t1, _x_part(dense_info, self._last_stage))
+        return (x1, values1), y_error, dense_info, (inner_state, last), result
 
     def func(self, terms, t0, y0, args):
         return self.solver.func(terms, t0, y0, args)
+
+
+def last_step(solver: CarryingSolver, solver_state) -> dfx.AbstractLocalInterpolation:
+    """The inner solver's dense output of x over the last accepted step, from the final
+    `solver_state` of a solve with `solver` (`diffrax.SaveAt(solver_state=True)`)."""
+    _, last = solver_state
+    return solver.solver.interpolation_cls(t0=last.t0, t1=last.t1, **last.dense)
