@@ -90,7 +90,7 @@ def _carrying_run(limit, v_min=-jnp.inf, solver=TSIT5, last_stage=False):
 
     args = _Args(v_min, jnp.array(jnp.nan))
     x0 = jnp.array([1.0, 0.0])
-    carrying = CarryingSolver(solver, args, at_step_end, _Args.marked if last_stage else None)
+    carrying = CarryingSolver(solver, at_step_end, _Args.marked if last_stage else None)
     sol = dfx.diffeqsolve(
         dfx.ODETerm(rates),
         carrying,
@@ -164,7 +164,7 @@ def test_every_step_is_cut_to_the_carried_limit():
 @pytest.mark.parametrize("v_min, which", [(-jnp.inf, 0), (-0.8, 1)])
 def test_the_event_names_the_condition_that_ended_the_run(v_min, which):
     """The root find on the last step returns, beside the event time, the index of the
-    condition that ended the run (from its last evaluation of the conditions), as the
+    condition that ended the run (the least of the conditions at the root), as the
     contact segment reads its trigger. With the velocity's condition at -0.8 the velocity
     ends the run before the position reaches -0.5; without it, the position does."""
     carried = _carrying(jnp.inf, v_min)
@@ -253,5 +253,5 @@ def test_a_method_without_first_same_as_last_computes_the_values_apart():
     says so, and the solver computes the values at each step's end even when given `mark`."""
     for method in (dfx.Heun(), dfx.Euler()):
         assert not reads_last_stage(method)
-        solver = CarryingSolver(method, None, _condition, _Args.marked)
+        solver = CarryingSolver(method, _condition, _Args.marked)
         assert not solver._last_stage

@@ -318,7 +318,7 @@ class ContactProgram(eqx.Module):
         settings = self.settings
         args = _Segment(scene, mode, offsets, ~done, jnp.array(jnp.nan, ts.dtype))
         rates, at_step_end, shifted_conditions = _step_end_functions(model, tol)
-        solver = CarryingSolver(settings.solver, args, at_step_end, _Segment.marked)
+        solver = CarryingSolver(settings.solver, at_step_end, _Segment.marked)
         state_only = lambda t, y, args: y[0]  # noqa: E731
         # diffrax stops at the end of the step in which the event function fell to zero; the
         # event is located on that step's dense output, kept in the solver's state

@@ -30,13 +30,12 @@ Where they come from at a step's end:
 The event itself is located outside diffrax (`_event_root.py`): diffrax stops at the end of
 the step in which c fell to zero (its event without a root finder), and the solver's state
 keeps that step's span and the inner solver's dense output of x (`LastStep`), returned by
-`diffrax.SaveAt(solver_state=True)`. The root find there evaluates the event function on the
-dense output and returns, beside the time, the index of the condition that ended the
-segment, from its last evaluation: the state at the root is only interpolated, with no solve
-of the mode there. (With diffrax's own root find, the state diffrax returned at the root
-was interpolated with the event function at it, a copy of the mode's solve kept only for
-that index.) Between step ends the dense output the solver gives diffrax (for the saves)
-interpolates x alone.
+`diffrax.SaveAt(solver_state=True)`. The root find there evaluates the conditions on the
+dense output and returns, beside the time, the conditions at the root, whose least ended
+the segment: the state at the root is only interpolated, with no solve of the mode there.
+(With diffrax's own root find, the state diffrax returned at the root was interpolated with
+the event function at it, a copy of the mode's solve kept only for that index.) Between
+step ends the dense output the solver gives diffrax (for the saves) interpolates x alone.
 """
 
 from collections.abc import Callable
@@ -134,10 +133,9 @@ class CarryingSolver(dfx.AbstractWrappedSolver):
     `mark` is given and `solver` allows it (`reads_last_stage`), [c, h] come from the last
     stage: the right-hand side, called with the arguments `mark(args, t1)`, returns them
     beside the rates at time t1; else from `at_step_end(t1, x1, args)`. Its state is the
-    inner solver's and the `LastStep` (`last_step`); `args` are the segment's arguments."""
+    inner solver's and the `LastStep` (`last_step`)."""
 
     solver: dfx.AbstractSolver
-    args: object
     at_step_end: Callable = eqx.field(static=True)
     mark: Callable | None = eqx.field(static=True, default=None)
 
