@@ -11,7 +11,7 @@ compile, with `DEFAULT_MAX_MB` or `$JAXRB_CACHE_MAX_MB`.
 A file's last use is the later of its access and modification times. Most file systems
 (Linux's default `relatime`) advance a file's access time on a read only where it is a day
 old or older than the file's last write, so a read is marked by hand: jaxrb marks a kept
-program used when it loads it (`mark_used`), and, once `mark_jax_reads` has run (as
+program used when it loads it (`mark_used`), and, once `hook_jax_cache` has run (as
 `speed_up_compilation` and `JAXRB_PROGRAMS=1` do), every file JAX's persistent cache reads
 back. (Counting a JAX file as used up to a day after its access time, as jaxrb did before,
 ranked every file JAX had read that day above every kept program, those of the code just
@@ -19,11 +19,18 @@ edited included: the first prune after an edit removed all the traced programs i
 kept, and the next run of the test suite traced them all again.)
 A file another process is reading or writing at that moment may be removed under it: JAX
 and jaxrb then compile that program again.
+
+JAX writes a file of its cache in place, without a lock where its own size limit is off
+(jaxrb's default): another process (a second test worker, a second `jaxrb run`) could read
+it half-written, fail to decompress it and compile the program again. `hook_jax_cache`
+also makes those writes atomic: the entry goes to a temporary file (`*.tmp`) that is
+then renamed, so a reader finds the whole entry or none.
 """
 
 import functools
 import os
 import stat
+import threading
 import time
 from pathlib import Path
 
@@ -60,18 +67,20 @@ def mark_used(path: Path) -> None:
         pass
 
 
-def mark_jax_reads() -> None:
+def hook_jax_cache() -> None:
     """From now on, in this process, mark every file JAX's persistent compilation cache
-    reads back as used (`mark_used`), so that a prune ranks it by its last use. Wraps the
-    read of JAX's file cache (`jax._src.lru_cache.LRUCache.get`, a private class: where it
-    is missing, nothing is marked). Idempotent."""
+    reads back as used (`mark_used`), so that a prune ranks it by its last use, and write
+    its new files atomically where JAX takes no lock (module docstring). Wraps the read and
+    the write of JAX's file cache (`jax._src.lru_cache.LRUCache.get` and `.put`, a private
+    class: where it is missing, JAX's cache is left as it is). Idempotent."""
     try:
         from jax._src import lru_cache
     except ImportError:
         return
     cache = getattr(lru_cache, "LRUCache", None)
-    read = getattr(cache, "get", None)
-    if read is None or getattr(read, "marks_use", False):
+    read, write = getattr(cache, "get", None), getattr(cache, "put", None)
+    suffix = getattr(lru_cache, "_CACHE_SUFFIX", None)
+    if read is None or write is None or suffix is None or getattr(read, "hooked", False):
         return
 
     @functools.wraps(read)
@@ -79,13 +88,36 @@ def mark_jax_reads() -> None:
         value = read(self, key)
         if value is not None:
             try:
-                mark_used(Path(str(self.path)) / f"{key}{lru_cache._CACHE_SUFFIX}")
+                mark_used(Path(str(self.path)) / f"{key}{suffix}")
             except Exception:  # noqa: BLE001  (a cache elsewhere than a local folder)
                 pass
         return value
 
-    get.marks_use = True
-    cache.get = get
+    @functools.wraps(write)
+    def put(self, key, value):
+        local = getattr(lru_cache, "_is_local_filesystem", lambda _: False)(str(self.path))
+        if not key or getattr(self, "eviction_enabled", True) or not local:
+            return write(self, key, value)  # JAX's own (under its lock, or a remote store)
+        path = Path(str(self.path)) / f"{key}{suffix}"
+        if path.exists():
+            return None  # as JAX: an entry is never replaced
+        write_atomically(path, value)
+        return None
+
+    get.hooked = put.hooked = True
+    cache.get, cache.put = get, put
+
+
+def write_atomically(path: Path, value: bytes) -> None:
+    """Write `value` to `path` through a temporary file beside it, renamed when complete, so
+    that a reader in another process sees the whole file or none."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f"{path.name}.{os.getpid()}-{threading.get_ident()}.tmp")
+    try:
+        tmp.write_bytes(value)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def _entries(directory: Path) -> list[tuple[float, int, list[Path]]]:

@@ -61,7 +61,7 @@ from pathlib import Path
 
 import jax
 
-from ._cache_size import cache_max_bytes, mark_jax_reads, prune_cache
+from ._cache_size import cache_max_bytes, hook_jax_cache, prune_cache
 from ._persistent import keep_programs
 
 CPU_FLAG = "--xla_cpu_use_fusion_emitters=false"
@@ -187,7 +187,7 @@ def speed_up_compilation(
     directory = Path(cache_dir).expanduser() if cache_dir is not None else default_cache_dir()
     directory.mkdir(parents=True, exist_ok=True)
     prune_cache(directory, cache_max_bytes(max_cache_mb))
-    mark_jax_reads()  # so that the next prune knows which of JAX's files are in use
+    hook_jax_cache()  # reads marked for the next prune; writes whole files only
     jax.config.update("jax_compilation_cache_dir", str(directory))
     if programs:
         keep_programs(True, directory / "programs", program_sources)

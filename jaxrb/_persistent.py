@@ -56,7 +56,7 @@ import jax
 import numpy as np
 from jax import export
 
-from ._cache_size import mark_jax_reads, mark_used
+from ._cache_size import hook_jax_cache, mark_used, write_atomically
 
 _PACKAGES = ("jax", "jaxlib", "equinox", "diffrax", "optimistix", "lineax")
 _RUNTIME_ERROR = getattr(jax.errors, "JaxRuntimeError", RuntimeError)  # XLA's, at run time
@@ -302,7 +302,7 @@ _KEEP = {
     "sources": tuple(p for p in os.environ.get("JAXRB_PROGRAM_SOURCES", "").split(os.pathsep) if p),
 }
 if _KEEP["on"]:  # jaxrb manages the cache folder: its prune needs JAX's reads marked
-    mark_jax_reads()
+    hook_jax_cache()
 
 
 def keep_programs(on: bool, cache_dir=None, sources=None) -> None:
@@ -314,7 +314,7 @@ def keep_programs(on: bool, cache_dir=None, sources=None) -> None:
     _KEEP["on"] = bool(on)
     _KEEP["dir"] = cache_dir
     if on:
-        mark_jax_reads()
+        hook_jax_cache()
     if sources is not None:
         _KEEP["sources"] = tuple(str(Path(p).expanduser().resolve()) for p in sources)
 
@@ -487,7 +487,7 @@ def _load_or_export(key, fn, static, in_tree, leaves, cache_dir, quiet):
         if made is None:
             return None
         exported, out_tree, blob = made
-        _write(path, blob)
+        write_atomically(path, blob)  # whole files: workers may write the same key at once
     compiled, code = _compile(exported, avals)
     if code is not False:
         kernels = _custom_kernels(exported)
@@ -577,13 +577,6 @@ def _export(fn, static, in_tree, avals, quiet):
     return exported, out_tree[-1], blob
 
 
-def _write(path: Path, blob: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(f".{os.getpid()}.tmp")
-    tmp.write_bytes(blob)
-    os.replace(tmp, path)  # whole files only: workers may write the same key at once
-
-
 @functools.cache
 def _machine_key() -> str:
     """What a compiled executable depends on besides its program: the backend and its
@@ -646,7 +639,7 @@ def _keep_executable(path: Path, compiled, out_tree, code=None, lapack=False) ->
         blob = pickle.dumps((zlib.compress(payload, 1), in_tree, out_tree, exe_out_tree, lapack))
     except Exception:  # noqa: BLE001  (no serialisation: the exported program is kept)
         return
-    _write(path, blob)
+    write_atomically(path, blob)
 
 
 def _serialize_with_code(compiled, code: bytes):

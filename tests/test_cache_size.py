@@ -4,12 +4,13 @@ import os
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import jax.numpy as jnp
 import pytest
 
 import jaxrb
-from jaxrb._cache_size import DEFAULT_MAX_MB, cache_max_bytes, prune_cache
+from jaxrb._cache_size import DEFAULT_MAX_MB, cache_max_bytes, hook_jax_cache, prune_cache
 
 MB = 2**20
 
@@ -29,7 +30,7 @@ def test_the_least_recently_used_entries_go_first_down_to_the_kept_share(tmp_pat
     old_jax = _entry(tmp_path / "old-cache", 3 * MB, 3 * day)  # JAX's: not read for days
     old_atime = _entry(tmp_path / "old-atime", 8, 3 * day)  # JAX's own LRU mark: goes with it
     # a JAX file read 10 h ago, older than the programs below (reads are marked by hand:
-    # `mark_jax_reads`; counted up to a day later, it would outrank them all)
+    # `hook_jax_cache`; counted up to a day later, it would outrank them all)
     earlier_jax = _entry(tmp_path / "new-cache", 2 * MB, 10 * 3600)
     old_program = _entry(programs / "a.bin", 2 * MB, 300)
     middle = _entry(programs / "a.cafe.exe", 2 * MB, 200)
@@ -122,3 +123,30 @@ def test_speed_up_compilation_prunes_its_directory_once_at_the_start(tmp_path):
     env = dict(os.environ, JAXRB_CACHE_MAX_MB="2.5", JAX_PLATFORMS="cpu")
     subprocess.run([sys.executable, "-c", code], env=env, check=True, timeout=120)
     assert not old.exists() and new.exists()
+
+
+def test_jax_s_cache_entries_are_written_whole(tmp_path, monkeypatch):
+    """JAX's file cache without its own size limit writes an entry in place, with no lock:
+    another process could read it half-written. Hooked, the entry goes to a temporary file
+    renamed when complete, and an existing entry is left as it is (as JAX does)."""
+    from jax._src import lru_cache
+
+    hook_jax_cache()
+    cache = lru_cache.LRUCache(str(tmp_path), max_size=-1)
+    renames = []
+    real_replace = os.replace
+
+    def spy(src, dst):
+        renames.append((Path(dst), Path(dst).exists(), Path(src).read_bytes()))
+        real_replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", spy)
+    value = bytes(range(256)) * 1000
+    cache.put("key", value)
+    entry = tmp_path / "key-cache"
+    assert renames == [(entry, False, value)]  # written whole beside it, then renamed
+    assert entry.read_bytes() == value
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["key-cache"]  # no temporary left
+    cache.put("key", b"other")
+    assert entry.read_bytes() == value and len(renames) == 1
+    assert cache.get("key") == value
