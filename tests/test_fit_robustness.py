@@ -9,6 +9,7 @@ import warnings
 
 import diffrax as dfx
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -163,3 +164,26 @@ def test_tolerance_and_budget_checks():
         jf.fit_inertia(TS, inertia0=np.diag(J_TRUE), omega=omega, sim_rtol=-1e-8)
     with pytest.raises(ValueError, match="both be 0"):
         jf.fit_drag(TS, np.zeros((TS.size, 3)), mass=1.0, drag0=0.1, sim_rtol=0, sim_atol=0)
+
+
+def test_the_jacobian_is_forward_mode_a_column_at_a_time():
+    """The fit's Jacobian (taken along one unit vector at a time) equals `jax.jacfwd` of the
+    residuals at the result, and its residuals the model's there (float64)."""
+
+    class Decay(eqx.Module):  # a * exp(-k t) + c sampled at 8 times, data with a wiggle
+        t: jax.Array
+
+        def __call__(self, z, args):
+            a, k, c = z
+            data = 2.0 * jnp.exp(-0.7 * self.t) + 0.3 + 0.01 * jnp.sin(5 * self.t)
+            return a * jnp.exp(-k * self.t) + c - data
+
+    fn = Decay(jnp.linspace(0.0, 3.0, 8))
+    res = jf.least_squares_fit(
+        fn, jnp.array([1.0, 0.3, 0.0]), lambda z: (z,), ("z",), ("a", "k", "c")
+    )
+    assert res.converged, res.message
+    z = jnp.asarray(res.values["z"])
+    expected = jax.jacfwd(lambda z: fn(z, None))(z)
+    np.testing.assert_allclose(res.jacobian, expected, rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(res.residuals, fn(z, None), rtol=1e-13, atol=1e-15)

@@ -115,7 +115,7 @@ def fit_contact(
     impact; otherwise the result carries an identifiability warning.
 
     The first call compiles the contact simulation with its forward derivatives: for a ball,
-    27-32 s on a 2-core x86 CPU with `jaxrb.speed_up_compilation()` called first, 58 s with
+    22-27 s on a 2-core x86 CPU with `jaxrb.speed_up_compilation()` called first, 42 s with
     XLA's defaults. Later calls with data of the same shapes reuse it (0.01-0.06 s).
     """
     if scene.floor is None or scene.floor.curved or scene.body.shape is None:
