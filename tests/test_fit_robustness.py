@@ -166,9 +166,11 @@ def test_tolerance_and_budget_checks():
         jf.fit_drag(TS, np.zeros((TS.size, 3)), mass=1.0, drag0=0.1, sim_rtol=0, sim_atol=0)
 
 
-def test_the_jacobian_is_forward_mode_a_column_at_a_time():
-    """The fit's Jacobian (taken along one unit vector at a time) equals `jax.jacfwd` of the
-    residuals at the result, and its residuals the model's there (float64)."""
+@pytest.mark.parametrize("jacobian", ["batched", "columns"])
+def test_the_jacobian_either_way_is_jax_jacfwd_s(jacobian):
+    """The fit's Jacobian (batched over the parameters, or a column at a time) equals
+    `jax.jacfwd` of the residuals at the result, and its residuals the model's there
+    (float64)."""
 
     class Decay(eqx.Module):  # a * exp(-k t) + c sampled at 8 times, data with a wiggle
         t: jax.Array
@@ -180,10 +182,12 @@ def test_the_jacobian_is_forward_mode_a_column_at_a_time():
 
     fn = Decay(jnp.linspace(0.0, 3.0, 8))
     res = jf.least_squares_fit(
-        fn, jnp.array([1.0, 0.3, 0.0]), lambda z: (z,), ("z",), ("a", "k", "c")
+        fn, jnp.array([1.0, 0.3, 0.0]), lambda z: (z,), ("z",), ("a", "k", "c"), jacobian=jacobian
     )
     assert res.converged, res.message
     z = jnp.asarray(res.values["z"])
     expected = jax.jacfwd(lambda z: fn(z, None))(z)
     np.testing.assert_allclose(res.jacobian, expected, rtol=1e-13, atol=1e-15)
     np.testing.assert_allclose(res.residuals, fn(z, None), rtol=1e-13, atol=1e-15)
+    with pytest.raises(ValueError, match="jacobian must be 'batched' or 'columns', got 'rows'"):
+        jf.least_squares_fit(fn, jnp.zeros(3), lambda z: (z,), ("z",), ("z",), jacobian="rows")

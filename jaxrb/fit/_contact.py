@@ -158,4 +158,7 @@ def fit_contact(
         rtol=rtol,
         atol=atol,
         max_steps=max_steps,
+        # the contact simulation's derivative batched over the parameters compiles slowly;
+        # two columns cost two short runs (`least_squares_fit`'s `jacobian`)
+        jacobian="columns",
     )

@@ -166,9 +166,10 @@ def _code(name: str) -> int:
 
 
 @entry_point
-def _solve(fn, to_physical, z0, rtol, atol, max_steps):
+def _solve(fn, to_physical, z0, rtol, atol, max_steps, jacobian="batched"):
     """Levenberg–Marquardt from `z0` (see the module docstring); one compiled evaluation of
-    the residuals and their Jacobian (forward mode, a column at a time) per trial point."""
+    the residuals and their Jacobian (forward mode, `jacobian` as in `least_squares_fit`)
+    per trial point."""
     z0 = jnp.asarray(z0)
     dtype = z0.dtype
     eps = jnp.finfo(dtype).eps
@@ -183,13 +184,12 @@ def _solve(fn, to_physical, z0, rtol, atol, max_steps):
         return jnp.asarray(fn(z, None), dtype)
 
     def evaluate(z):
-        # the Jacobian a column at a time: forward mode along each unit vector, in a loop
-        # over the p directions, not batched over them (`jax.jacfwd`). For a simulation with
-        # a floor that traces and compiles in about 3/4 of the time (docs/contact.md,
-        # "Derivatives through contact"); each pass repeats the residuals (milliseconds)
-        column = lambda direction: jax.jvp(residuals, (z,), (direction,))  # noqa: E731
-        rs, columns = jax.lax.map(column, jnp.eye(p, dtype=dtype))
-        return rs[0], columns.T
+        if jacobian == "columns":  # forward mode along one unit vector at a time, in a loop
+            column = lambda direction: jax.jvp(residuals, (z,), (direction,))  # noqa: E731
+            rs, columns = jax.lax.map(column, jnp.eye(p, dtype=dtype))
+            return rs[0], columns.T
+        jac, r = jax.jacfwd(lambda zz: (residuals(zz),) * 2, has_aux=True)(z)
+        return r, jac
 
     def body(s: _Loop) -> _Loop:
         first = s.reason < 0
@@ -292,6 +292,7 @@ def least_squares_fit(
     max_steps: int = 200,
     cond_warn: float = DEFAULT_COND_WARN,
     notes: tuple[str, ...] = (),
+    jacobian: str = "batched",
 ) -> FitResult:
     """Minimise `|fn(z)|^2` with Levenberg–Marquardt and report values, errors, identifiability.
 
@@ -322,6 +323,14 @@ def least_squares_fit(
     - `cond_warn`: condition-number threshold of the identifiability warning.
     - `notes`: facts to attach to `FitResult.warnings` without emitting them (e.g. that the
       scale was fixed by the caller's choice).
+    - `jacobian`: how forward mode gives the residuals' Jacobian. `"batched"` (default):
+      `jax.jacfwd`, batched over the p parameters, one evaluation of the residuals per
+      trial point. `"columns"`: `jax.jvp` along one parameter at a time in a loop, the
+      residuals evaluated p times; for a simulation with a floor and few parameters it
+      traces and compiles in about 3/4 of the time (`fit_contact`: first call 22-27 s
+      against 30-37 s), while a fit of many parameters over a long simulation runs slower
+      (`fit_inertia`, 11 parameters over 200 s: 4.9 against 2.2 s per fit); docs/contact.md,
+      "Derivatives through contact".
 
     **Returns:** a `FitResult`.
     """
@@ -331,12 +340,20 @@ def least_squares_fit(
             raise ValueError(f"{name} must be a finite number >= 0, got {tol}")
     if int(max_steps) != max_steps or max_steps < 0:
         raise ValueError(f"max_steps must be an integer >= 0, got {max_steps}")
+    if jacobian not in ("batched", "columns"):
+        raise ValueError(f"jacobian must be 'batched' or 'columns', got {jacobian!r}")
     # compiled (traced, differentiated and lowered) inside the scope: the derivative of each
     # event time carries a checked linear solve, whose host callback would keep the
     # program out of JAX's persistent cache
     with checks_without_host_callbacks():
         state, values_flat, grad_phys = _solve(
-            fn, to_physical, z0, jnp.asarray(rtol), jnp.asarray(atol), jnp.asarray(int(max_steps))
+            fn,
+            to_physical,
+            z0,
+            jnp.asarray(rtol),
+            jnp.asarray(atol),
+            jnp.asarray(int(max_steps)),
+            jacobian,
         )
     r, jac, grad_phys = np.asarray(state.r), np.asarray(state.jac), np.asarray(grad_phys)
     values_flat = [np.asarray(v) for v in values_flat]
