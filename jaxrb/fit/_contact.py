@@ -159,6 +159,7 @@ def fit_contact(
         atol=atol,
         max_steps=max_steps,
         # the contact simulation's derivative batched over the parameters compiles slowly;
-        # two columns cost two short runs (`least_squares_fit`'s `jacobian`)
+        # a column per parameter (one or two) costs a short run each (`least_squares_fit`'s
+        # `jacobian`)
         jacobian="columns",
     )
