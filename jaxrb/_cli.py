@@ -44,6 +44,7 @@ from ._cli_common import (
 from ._cli_fit import add_fit_parser
 from ._compilation import speed_up_compilation
 from ._compile_notice import CompileNotice
+from ._plot_preload import PlotPreload, run_plot_names
 
 MAX_SWEEP_RUNS = 100_000
 """The most grid points (runs) one `jaxrb sweep` may have."""
@@ -278,8 +279,6 @@ def _run_outputs(scene, args) -> list[str]:
     """The files `jaxrb run` writes, in order."""
     names = ["trajectory.npz", "trajectory.csv", "scene.toml"]
     if not args.no_plots:
-        from .plotting import run_plot_names
-
         names += run_plot_names(scene)
     if args.animate:
         names.append("animation.gif")
@@ -354,11 +353,17 @@ def cmd_run(args) -> int:
             f"jaxrb run: {spec.title or label} ({label}); "
             f"integrating t = {spec.ts[0]:g} .. {spec.ts[-1]:g} s ..."
         )
-        t0 = time.perf_counter()
-        with CompileNotice(say, cached=not args.no_cache):
-            traj = _simulate_checked(spec, progress=args.progress)
-            traj.ts.block_until_ready()
-        wall = time.perf_counter() - t0
+        # matplotlib loads on another thread while XLA loads or compiles the program
+        preload = PlotPreload() if not args.no_plots or args.animate else None
+        try:
+            t0 = time.perf_counter()
+            with CompileNotice(say, cached=not args.no_cache):
+                traj = _simulate_checked(spec, progress=args.progress)
+                traj.ts.block_until_ready()
+            wall = time.perf_counter() - t0
+        finally:  # nothing else uses matplotlib while that thread does
+            if preload is not None:
+                preload.wait()
         from ._trajectory_files import file_arrays
 
         m = _metrics(traj, spec.scene)

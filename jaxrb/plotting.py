@@ -17,6 +17,8 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
+from ._plot_preload import run_plot_names
+
 __all__ = [
     "animate",
     "euler321_deg",
@@ -356,12 +358,6 @@ def _reaction_hinge(ax, r, release):
     ax.set_ylabel("bearing force (N)")
     ax.grid(alpha=0.3)
     _legend(ax)
-
-
-def run_plot_names(scene) -> list[str]:
-    """The PNG files `save_run_plots` writes for `scene`."""
-    names = ["height_attitude.png", "angular_velocity.png", "energy.png"]
-    return names + (["reaction.png"] if scene.joint is not None else [])
 
 
 def save_run_plots(traj, scene, outdir, title=None) -> list[Path]:

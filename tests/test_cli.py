@@ -4,6 +4,7 @@ import csv
 import re
 import subprocess
 import sys
+import threading
 import tomllib
 from pathlib import Path
 
@@ -88,6 +89,32 @@ def test_run_writes_outputs(run_dir):
     assert _listed_outputs(summary) == sorted(p.name for p in run_dir.iterdir())
 
 
+def _preload_threads() -> list[str]:
+    return [t.name for t in threading.enumerate() if t.name == "jaxrb-plot-preload"]
+
+
+def test_run_loads_matplotlib_beside_the_simulation_and_waits_for_it(run_dir):
+    """`jaxrb run` loads matplotlib on a second thread while XLA loads or compiles; the
+    thread has ended when the command returns (the plots above were drawn after it)."""
+    assert _preload_threads() == []
+
+
+def test_plot_preload_keeps_its_errors_to_itself(monkeypatch, capsys):
+    """A failure on the preload thread is left for the main thread's own drawing to report:
+    nothing raised, nothing printed."""
+    from matplotlib.figure import Figure
+
+    from jaxrb._plot_preload import PlotPreload
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("no fonts")
+
+    monkeypatch.setattr(Figure, "savefig", broken)
+    PlotPreload().wait()
+    assert _preload_threads() == []
+    assert capsys.readouterr().err == ""
+
+
 def _listed_outputs(summary: str) -> list[str]:
     """The file names of the summary's `output` row, `DIR/ (a, b, ...)`."""
     line = next(x for x in summary.splitlines() if x.startswith("output "))
@@ -157,6 +184,7 @@ def test_run_refuses_motion_the_joint_cannot_have(tmp_path, capsys, initial, fie
     assert err.startswith(f"jaxrb run: error: {scene}: {field}: {problem}"), err
     assert err.count("\n") == 1 and "Traceback" not in err
     assert not out.exists()
+    assert _preload_threads() == []  # waited for on the way out, too
 
 
 def test_pendulum_example_bearing_force(tmp_path, capsys):
