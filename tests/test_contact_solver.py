@@ -490,6 +490,77 @@ def test_mode_choice_equals_testing_every_mode():
         assert np.mean(np.asarray(chosen.kind) != 0) > 0.5
 
 
+# die 875 of `contact_throws --n 1000` at 0.3142465116 s (position m, quaternion, velocity m/s,
+# omega rad/s, body) as the event there left it: on an edge (its points 1 and 5), both ends
+# sliding, end 5's normal force had reached zero as end 1's slip fell below slip_stop
+EDGE_LIFTS_AS_SLIP_STOPS = (
+    (0.051258116927898556, -0.002796369974588031, 0.011083869046289146),
+    (-0.16028607861395563, -0.2978783013712541, 0.8286957916841006, 0.4459149867629469),
+    (0.057854863771767254, -0.06985575992854219, -0.018470127836288312),
+    (-8.140612593761679, 0.04962672788033679, -0.03276168129891336),
+)
+
+
+@persistent
+def _edge_choice(state, restitution, friction, old, trigger, slip_may_be_gone):
+    """`select_mode` for the die of `contact_throws` at `state` after the event `trigger`
+    ended the mode `old`; `slip_may_be_gone` (P,) masks which points may count as without
+    slip. Also the chosen mode's margins (m/s^2), and the points resting and without slip."""
+    from jaxrb.contact._select import _candidate, select_mode
+
+    shape = jaxrb.Box(jnp.full(3, 0.008))
+    model = contact_model(shape)
+    body = jaxrb.RigidBody(0.0045, shape=shape)
+    scene = jaxrb.Scene(body, (jaxrb.Gravity(),), floor=jaxrb.Floor(restitution, friction))
+    geom = geometry(state, scene, model, old.seed, old.side)
+    flat = jnp.asarray(model.flat_points)
+    touching = geom.gap <= jnp.where(flat, TOL.flat, TOL.contact)
+    resting = touching & (jnp.abs(geom.gap_rate) <= TOL.slip_stop)
+    zero_slip = (jnp.linalg.norm(geom.slip, axis=-1) <= TOL.slip_stop) & slip_may_be_gone
+    t = 0.3142465116295643
+    table = CandidateTable(model)
+    args = (t, state, geom, old, trigger, scene, model, table, TOL, resting, zero_slip)
+    chosen = select_mode(*args)
+    tested = _candidate(t, state, geom, chosen.mode, scene, model, TOL, resting, zero_slip, True)
+    return chosen, tested[1], resting, zero_slip
+
+
+def test_an_edge_whose_end_lifts_as_the_other_ends_slip_stops_has_a_consistent_mode():
+    """Die 875 of `contact_throws --n 1000` slid on an edge; end 5's normal force reached
+    zero as end 1's slip fell below slip_stop. The event's lift-off ruled out every mode
+    with end 5, which left end 1 alone (sticking: end 5 would sink at 4.96 m/s^2; sliding
+    from rest: at 7.95) or flight: no consistent mode. But with end 1's slip gone the
+    pair's modes are other modes than the one whose normal force reached zero: with end 1
+    sticking and end 5 sliding the pair holds (every margin > 1 m/s^2). Where end 1 is taken
+    to slip still, the lift-off rules the pair out as before."""
+    states, restitution, friction = throws(1000, 0)
+    e, mu = restitution[875], friction[875]
+    pos, quat, vel, omega = map(jnp.asarray, EDGE_LIFTS_AS_SLIP_STOPS)
+    state = jaxrb.State(pos, quat, vel, omega)
+    old = eqx.tree_at(
+        lambda m: (m.kind, m.a, m.b),
+        flight_mode(jnp.float64),
+        (jnp.array(PAIR, jnp.int32), jnp.array(1, jnp.int32), jnp.array(5, jnp.int32)),
+    )
+    model = contact_model(jaxrb.Box(jnp.full(3, 0.008)))
+    lift_off_b = jnp.array(model.num_points + 1)  # NORMAL_B: end b's normal force
+    every = jnp.ones(model.num_points, bool)
+    chosen, margins, resting, zero_slip = _edge_choice(state, e, mu, old, lift_off_b, every)
+    points = np.arange(model.num_points)
+    np.testing.assert_array_equal(np.asarray(resting), np.isin(points, [1, 5]))
+    np.testing.assert_array_equal(np.asarray(zero_slip), points == 1)
+    assert bool(chosen.consistent)
+    mode = chosen.mode
+    assert (int(mode.kind), int(mode.a), int(mode.b)) == (PAIR, 1, 5)
+    assert np.asarray(mode.stick).tolist() == [True, False]
+    used = np.abs(np.asarray(margins)) < 1e29
+    assert np.all(np.asarray(margins)[used] > 1.0), margins
+    # end 1 counted as still slipping: the pair stays ruled out (end 1 slides on alone)
+    chosen, _, _, zero_slip = _edge_choice(state, e, mu, old, lift_off_b, ~every)
+    assert not np.any(np.asarray(zero_slip))
+    assert (int(chosen.mode.kind), int(chosen.mode.a)) == (POINT, 1)
+
+
 def test_a_shape_without_pairs_has_no_pair_search_in_its_program(monkeypatch):
     """A candidate's sliding directions from rest are searched for a pair's ends only where
     the shape has pairs: a ball on one surface (no pair modes) traces no pair search, a box

@@ -407,9 +407,12 @@ def _pair_directions(geom, mode, hats0, rest_a, rest_b, scanned, live, solve, re
     return hats0, exact_a, exact_b, exact_pair
 
 
-def exclusions(table, candidates, model, old, trigger):
+def exclusions(table, candidates, model, old, trigger, zero_slip=None):
     """Mask of the `candidates` that the event which ended the segment rules out (they would
-    re-enter the boundary just crossed); `trigger` indexes the condition vector, -1: none."""
+    re-enter the boundary just crossed); `trigger` indexes the condition vector, -1: none.
+    With `zero_slip` ((P,) points whose slip is below slip_stop), the narrower mask that
+    `select_mode` falls back on where no candidate fits: a pair's end that lifted off rules
+    out the pair's modes only while the other end still slides (below)."""
     P = model.num_points
     old_active = active_points(model, old)
     t_active = jnp.asarray(table.active)[candidates]
@@ -420,18 +423,27 @@ def exclusions(table, candidates, model, old, trigger):
     old_face = old.kind == FACE
     k = trigger - P
     idx = jnp.arange(P, dtype=old.a.dtype)
-    # a normal force reached zero: that point (a face: all its points) stops carrying
-    lifted_a = jnp.where(old_face, old_active, idx == old.a)
-    ex_normal_a = jnp.any(t_active & lifted_a, axis=1)
-    ex_normal_b = jnp.any(t_active & (idx == old.b), axis=1)
-    # friction reached the cone: that point (or face) no longer sticks
-    ex_cone_a = jnp.where(old_face, same_face & stick[:, 0], t_sticking[:, old.a])
-    ex_cone_b = t_sticking[:, old.b]
     same_pair = (
         (kind == PAIR)
         & (jnp.asarray(table.a)[candidates] == old.a)
         & (jnp.asarray(table.b)[candidates] == old.b)
     )
+    # a normal force reached zero: that point (a face: all its points) stops carrying, in
+    # the mode that ended. Where the pair's other point slid and its slip is gone too (both
+    # boundaries reached within the event's tolerance), every mode of the pair is another
+    # mode (that point now sticks or slides from rest), whose normal force the event has
+    # not tested: with `zero_slip` given, those stay candidates
+    slid = (old.kind == PAIR) & ~old.stick & ~old.from_rest
+    if zero_slip is None:
+        slid_to_rest = jnp.zeros(2, bool)
+    else:
+        slid_to_rest = slid & zero_slip[jnp.stack([old.a, old.b])]
+    lifted_a = jnp.where(old_face, old_active, idx == old.a)
+    ex_normal_a = jnp.any(t_active & lifted_a, axis=1) & ~(same_pair & slid_to_rest[1])
+    ex_normal_b = jnp.any(t_active & (idx == old.b), axis=1) & ~(same_pair & slid_to_rest[0])
+    # friction reached the cone: that point (or face) no longer sticks
+    ex_cone_a = jnp.where(old_face, same_face & stick[:, 0], t_sticking[:, old.a])
+    ex_cone_b = t_sticking[:, old.b]
     ex_axial = same_pair & stick[:, 0] & stick[:, 1]
     # the centre of pressure left the face (a support: a vertex's normal force reached
     # zero): that face's limit-surface modes, or that support, no longer hold; the face's
@@ -462,6 +474,8 @@ def select_mode(
 
     t_active = jnp.asarray(table.active)[candidates]
     admissible = jnp.all(~t_active | resting, axis=1)
+    # where no candidate fits, the narrower exclusions (`exclusions`) are tried
+    relaxed = admissible & ~exclusions(table, candidates, model, old, trigger, zero_slip)
     admissible = admissible & ~exclusions(table, candidates, model, old, trigger)
 
     # a chunk of candidates at a time (under vmap side by side), in the table's order, until
@@ -500,6 +514,13 @@ def select_mode(
     modes, margins, still, paradox = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), tested)
     admissible = admissible & jnp.repeat(was_tested, size)
     admissible, violation, ok, plain = verdict(admissible, margins, still, paradox)
+    # no candidate fits: the loop tested every chunk, and the narrower exclusions may leave
+    # one that does
+    relaxed = verdict(relaxed & jnp.repeat(was_tested, size), margins, still, paradox)
+    use_relaxed = ~jnp.any(ok) & jnp.any(relaxed[2])
+    admissible, violation, ok, plain = jax.tree.map(
+        lambda r, s: jnp.where(use_relaxed, r, s), relaxed, (admissible, violation, ok, plain)
+    )
     any_ok = jnp.any(ok)
     # the Painlevé paradox: with no consistent mode, a sliding contact on a normal problem
     # that is not a P-matrix has no solution; a consistent mode of that kind has a rival (the
