@@ -44,7 +44,8 @@ from ._cli_common import (
 from ._cli_fit import add_fit_parser
 from ._compilation import speed_up_compilation
 from ._compile_notice import CompileNotice
-from ._plot_preload import PlotPreload, run_plot_names
+from ._plot_preload import PlotPreload
+from ._run_files import run_outputs
 
 MAX_SWEEP_RUNS = 100_000
 """The most grid points (runs) one `jaxrb sweep` may have."""
@@ -275,16 +276,6 @@ def _result_name(result) -> str:
 # run
 
 
-def _run_outputs(scene, args) -> list[str]:
-    """The files `jaxrb run` writes, in order."""
-    names = ["trajectory.npz", "trajectory.csv", "scene.toml"]
-    if not args.no_plots:
-        names += run_plot_names(scene)
-    if args.animate:
-        names.append("animation.gif")
-    return names + ["summary.txt"]
-
-
 def _scene_text(path: Path, t_end) -> str:
     """The scene file's text as run: with `[simulation].t_end` set to `--t-end` if given."""
     from ._scene_file import read_scene_text, with_t_end
@@ -348,7 +339,11 @@ def cmd_run(args) -> int:
         _check_title(spec)
     label = "built-in default scene" if args.scene is None else _printable(args.scene)
     say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr, flush=True))
-    with StagedOutput(args.output, _run_outputs(spec.scene, args), args.force) as out:
+    with StagedOutput(
+        args.output,
+        run_outputs(spec.scene, plots=not args.no_plots, animate=args.animate),
+        args.force,
+    ) as out:
         say(
             f"jaxrb run: {spec.title or label} ({label}); "
             f"integrating t = {spec.ts[0]:g} .. {spec.ts[-1]:g} s ..."

@@ -11,14 +11,7 @@ it before drawing anything: the two never use matplotlib at once.
 import io
 import threading
 
-__all__ = ["PlotPreload", "run_plot_names"]
-
-
-def run_plot_names(scene) -> list[str]:
-    """The PNG files `jaxrb.plotting.save_run_plots` writes for `scene` (no matplotlib
-    needed to know them)."""
-    names = ["height_attitude.png", "angular_velocity.png", "energy.png"]
-    return names + (["reaction.png"] if scene.joint is not None else [])
+__all__ = ["PlotPreload"]
 
 
 def _load_and_draw_once() -> None:

@@ -17,7 +17,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from ._plot_preload import run_plot_names
+from ._run_files import run_plot_names
 
 __all__ = [
     "animate",

@@ -10,9 +10,9 @@ from programs import persistent
 from turning_states import first_face_down, flat_turning_states
 
 import jaxrb
-from benchmarks.contact_throws import throws
+from benchmarks.contact_throws import shape_of, throws
 from benchmarks.face_vertex_lcp import vertex_problem
-from jaxrb.contact._events import SLIP_A, condition_tolerances, slide_end
+from jaxrb.contact._events import CONE_A, SLIP_A, condition_tolerances, slide_end
 from jaxrb.contact._features import contact_model
 from jaxrb.contact._modes import (
     FACE,
@@ -456,7 +456,7 @@ def _choices(which, states, friction):
             )
         )(every)
         admissible = jnp.all(~jnp.asarray(table.active) | resting, axis=1) & still
-        admissible = admissible & ~exclusions(table, every, model, old, trigger)
+        admissible = admissible & ~exclusions(table, every, model, old, trigger, zero_slip)[0]
         violation = jnp.max(jnp.maximum(-margins, 0.0), axis=1)
         ok = admissible & (violation <= TOL.force)
         plain = ok & ~paradox
@@ -559,6 +559,84 @@ def test_an_edge_whose_end_lifts_as_the_other_ends_slip_stops_has_a_consistent_m
     chosen, _, _, zero_slip = _edge_choice(state, e, mu, old, lift_off_b, ~every)
     assert not np.any(np.asarray(zero_slip))
     assert (int(chosen.mode.kind), int(chosen.mode.a)) == (POINT, 1)
+
+
+# d12 69 of `contact_throws --n 300 --shapes d12` at 0.7010875018938936 s (position m,
+# quaternion, velocity m/s, omega rad/s, body) as the event there left it: on an edge (its
+# points 5 and 9), end 5 sticking and end 9 sliding, end 5's friction had reached the cone
+CONE_EDGE_OF_A_PIVOTING_EDGE = (
+    (0.03877962500673957, -0.19623262964520216, 0.01084539003753185),
+    (0.06592710098750075, 0.9651799407200761, -0.03396583268018705, -0.2508537852959681),
+    (0.026516348419317794, -0.1358447352632256, -0.06375012406934585),
+    (12.534053671033965, -4.679969709329864, -4.535978218510977),
+)
+
+
+@persistent
+def _cone_edge_choice(state, restitution, friction, old, trigger):
+    """`select_mode` for the d12 of `contact_throws` at `state` after the event `trigger`
+    ended the mode `old`, the chosen mode's margins (m/s^2), and the friction (world, N)
+    and normal force (N) at `old`'s end a in `old` itself."""
+    from jaxrb.contact._select import _candidate, select_mode
+
+    mass, make_shape, _, _ = shape_of("d12")
+    shape = make_shape()
+    model = contact_model(shape)
+    body = jaxrb.RigidBody(mass, shape=shape)
+    scene = jaxrb.Scene(body, (jaxrb.Gravity(),), floor=jaxrb.Floor(restitution, friction))
+    geom = geometry(state, scene, model, old.seed, old.side)
+    flat = jnp.asarray(model.flat_points)
+    touching = geom.gap <= jnp.where(flat, TOL.flat, TOL.contact)
+    resting = touching & (jnp.abs(geom.gap_rate) <= TOL.slip_stop)
+    zero_slip = jnp.linalg.norm(geom.slip, axis=-1) <= TOL.slip_stop
+    t = 0.7010875018938936
+    table = CandidateTable(model)
+    args = (t, state, geom, old, trigger, scene, model, table, TOL, resting, zero_slip)
+    chosen = select_mode(*args)
+    tested = _candidate(t, state, geom, chosen.mode, scene, model, TOL, resting, zero_slip, True)
+    held = solve_mode(t, state, old, scene, model, TOL, geom=geom)
+    d = held.rows.J[:, :3]
+    return chosen, tested[1], held.lam[2] * d[2] + held.lam[3] * d[3], held.lam[0]
+
+
+def test_a_pivoting_edge_whose_sticking_end_reaches_the_cone_slides_on_from_rest():
+    """d12 69 of `contact_throws` pivoted on an edge, end 5 sticking while end 9 slid, until
+    end 5's friction reached the cone. The next mode is the edge with end 5 sliding from
+    rest, in the direction opposite to the friction it carried, where its slip starts with
+    no acceleration at all: the scan of directions finds that root, whose a_t . s is then
+    roundoff (-2e-15 m/s^2 here) of either sign. Counted only where a_t . s >= 0, the root
+    was refused and the candidate fell back on the direction of both ends sticking, from
+    which the fixed point ran to a direction whose slip decelerates (-0.94 m/s^2): no mode
+    was consistent."""
+    states, restitution, friction = throws(300, 0)
+    e, mu = restitution[69], friction[69]
+    state = jaxrb.State(*map(jnp.asarray, CONE_EDGE_OF_A_PIVOTING_EDGE))
+    old = eqx.tree_at(
+        lambda m: (m.kind, m.a, m.b, m.stick),
+        flight_mode(jnp.float64),
+        (
+            jnp.array(PAIR, jnp.int32),
+            jnp.array(5, jnp.int32),
+            jnp.array(9, jnp.int32),
+            jnp.array([True, False]),
+        ),
+    )
+    num_points = contact_model(shape_of("d12")[1]()).num_points
+    cone_a = jnp.array(num_points + CONE_A)
+    chosen, margins, friction_a, normal_a = _cone_edge_choice(state, e, mu, old, cone_a)
+    # the event left end 5's friction on the cone's edge
+    friction_a, normal_a = np.asarray(friction_a), float(normal_a)
+    assert normal_a > 0
+    np.testing.assert_allclose(np.linalg.norm(friction_a), float(mu) * normal_a, rtol=1e-9)
+    assert bool(chosen.consistent)
+    mode = chosen.mode
+    assert (int(mode.kind), int(mode.a), int(mode.b)) == (PAIR, 5, 9)
+    assert np.asarray(mode.stick).tolist() == [False, False]
+    assert np.asarray(mode.from_rest).tolist() == [True, False]
+    start = np.asarray(mode.slide_dir[0])
+    np.testing.assert_allclose(start, -friction_a / np.linalg.norm(friction_a), atol=1e-9)
+    used = np.abs(np.asarray(margins)) < 1e29
+    assert np.all(np.asarray(margins)[used] >= -1e-12), margins
 
 
 def test_a_shape_without_pairs_has_no_pair_search_in_its_program(monkeypatch):

@@ -42,12 +42,14 @@ NEWTON_ITERATIONS = 8  # for the two directions of a pair whose ends both slide 
 MAX_NEWTON_STEP = 0.5  # rad
 
 
-def scan_direction(measure, n, t1, t2, dtype):
+def scan_direction(measure, n, t1, t2, dtype, slack):
     """The direction s (world, unit, in the floor plane) in which a contact at rest starts
     to slide, given `measure(s)` -> (its slip acceleration a_t (3,) when friction opposes s,
     whether the contact forces are then admissible): a_t must be kappa s, kappa >= 0. The
     circle of directions is scanned, the bracket of a root of (a_t x s) . n with the fastest
-    admissible slip acceleration along s is refined by regula falsi. Returns (s, found)."""
+    admissible slip acceleration along s is refined by regula falsi. A root counts where
+    a_t . s >= -`slack` (m/s^2): at the friction cone's edge the slip starts with no
+    acceleration at all, and the sign of a_t . s there is roundoff's. Returns (s, found)."""
     step = 2 * jnp.pi / DIRECTIONS
 
     def at(phi):
@@ -83,7 +85,7 @@ def scan_direction(measure, n, t1, t2, dtype):
     )
     # the end nearer the root, with what was measured there
     phi, _, along_root, admissible_root = tree_where(jnp.abs(lo[1]) < jnp.abs(hi[1]), lo, hi)
-    found = jnp.any(good) & (along_root >= 0) & admissible_root
+    found = jnp.any(good) & (along_root >= -slack) & admissible_root
     return jnp.cos(phi) * t1 + jnp.sin(phi) * t2, found
 
 
@@ -253,11 +255,14 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
 
     scan_dir, found = only_where_needed(
         live & (point | (pair & (rest_a != rest_b))),
-        lambda: scan_direction(measure, *geom.frame_of(jnp.where(scan_b, mode.b, mode.a)), dtype),
+        lambda: scan_direction(
+            measure, *geom.frame_of(jnp.where(scan_b, mode.b, mode.a)), dtype, tol.force
+        ),
         lambda: (zero3, jnp.array(False)),
     )
-    # (none found: at the cone's edge the slip's acceleration vanishes along the direction
-    # opposite to the friction sticking needs, which the seed already is)
+    # (none found: at a single point's cone's edge the slip's acceleration vanishes along
+    # the direction opposite to the friction sticking needs, which the seed already is; a
+    # pair's seed is that of both ends sticking, which is not where one end slides)
     hats0 = seeds(jnp.where((mode.kind == POINT) & found, -scan_dir, need_a))
     # a shape without pairs (a ball on one surface) has no pair modes: no pair searches
     exact_a = exact_b = exact_pair = jnp.array(False)
@@ -407,12 +412,12 @@ def _pair_directions(geom, mode, hats0, rest_a, rest_b, scanned, live, solve, re
     return hats0, exact_a, exact_b, exact_pair
 
 
-def exclusions(table, candidates, model, old, trigger, zero_slip=None):
-    """Mask of the `candidates` that the event which ended the segment rules out (they would
-    re-enter the boundary just crossed); `trigger` indexes the condition vector, -1: none.
-    With `zero_slip` ((P,) points whose slip is below slip_stop), the narrower mask that
-    `select_mode` falls back on where no candidate fits: a pair's end that lifted off rules
-    out the pair's modes only while the other end still slides (below)."""
+def exclusions(table, candidates, model, old, trigger, zero_slip):
+    """Masks of the `candidates` that the event which ended the segment rules out (they would
+    re-enter the boundary just crossed; `trigger` indexes the condition vector, -1: none),
+    and of those among them that a stopped slip readmits where no candidate fits (a pair's
+    end that lifted off rules out the pair's modes only while the other end still slides;
+    `zero_slip`: (P,) points whose slip is below slip_stop)."""
     P = model.num_points
     old_active = active_points(model, old)
     t_active = jnp.asarray(table.active)[candidates]
@@ -432,15 +437,12 @@ def exclusions(table, candidates, model, old, trigger, zero_slip=None):
     # the mode that ended. Where the pair's other point slid and its slip is gone too (both
     # boundaries reached within the event's tolerance), every mode of the pair is another
     # mode (that point now sticks or slides from rest), whose normal force the event has
-    # not tested: with `zero_slip` given, those stay candidates
+    # not tested: those are readmitted
     slid = (old.kind == PAIR) & ~old.stick & ~old.from_rest
-    if zero_slip is None:
-        slid_to_rest = jnp.zeros(2, bool)
-    else:
-        slid_to_rest = slid & zero_slip[jnp.stack([old.a, old.b])]
+    slid_to_rest = slid & zero_slip[jnp.stack([old.a, old.b])]
     lifted_a = jnp.where(old_face, old_active, idx == old.a)
-    ex_normal_a = jnp.any(t_active & lifted_a, axis=1) & ~(same_pair & slid_to_rest[1])
-    ex_normal_b = jnp.any(t_active & (idx == old.b), axis=1) & ~(same_pair & slid_to_rest[0])
+    ex_normal_a = jnp.any(t_active & lifted_a, axis=1)
+    ex_normal_b = jnp.any(t_active & (idx == old.b), axis=1)
     # friction reached the cone: that point (or face) no longer sticks
     ex_cone_a = jnp.where(old_face, same_face & stick[:, 0], t_sticking[:, old.a])
     ex_cone_b = t_sticking[:, old.b]
@@ -451,11 +453,13 @@ def exclusions(table, candidates, model, old, trigger, zero_slip=None):
     support = jnp.asarray(table.support)[candidates]
     same_support = jnp.all(support == old.support, axis=1)
     ex_cop = same_face & jnp.where(on_support(old), same_support, support[:, 0] < 0)
-    return jnp.select(
+    excluded = jnp.select(
         [k == NORMAL_A, k == NORMAL_B, k == CONE_A, k == CONE_B, k == AXIAL, k == COP],
         [ex_normal_a, ex_normal_b, ex_cone_a, ex_cone_b, ex_axial, ex_cop],
         jnp.zeros(candidates.shape, bool),
     )
+    other_end_stopped = ((k == NORMAL_A) & slid_to_rest[1]) | ((k == NORMAL_B) & slid_to_rest[0])
+    return excluded, excluded & same_pair & other_end_stopped
 
 
 def select_mode(
@@ -474,9 +478,10 @@ def select_mode(
 
     t_active = jnp.asarray(table.active)[candidates]
     admissible = jnp.all(~t_active | resting, axis=1)
-    # where no candidate fits, the narrower exclusions (`exclusions`) are tried
-    relaxed = admissible & ~exclusions(table, candidates, model, old, trigger, zero_slip)
-    admissible = admissible & ~exclusions(table, candidates, model, old, trigger)
+    # where no candidate fits, those a stopped slip readmits (`exclusions`) are tried
+    excluded, readmitted = exclusions(table, candidates, model, old, trigger, zero_slip)
+    relaxed = admissible & (~excluded | readmitted)
+    admissible = admissible & ~excluded
 
     # a chunk of candidates at a time (under vmap side by side), in the table's order, until
     # one holds a consistent candidate with no rival (the Painlevé paradox's, below): the
