@@ -501,28 +501,40 @@ EDGE_LIFTS_AS_SLIP_STOPS = (
 )
 
 
-@persistent
-def _edge_choice(state, restitution, friction, old, trigger, slip_may_be_gone):
-    """`select_mode` for the die of `contact_throws` at `state` after the event `trigger`
-    ended the mode `old`; `slip_may_be_gone` (P,) masks which points may count as without
-    slip. Also the chosen mode's margins (m/s^2), and the points resting and without slip."""
+def _choice_at_event(t, state, scene, old, trigger, slip_may_be_gone=True):
+    """`select_mode` for `scene` (a throw of `contact_throws`) at time `t` (s) and `state`
+    after the event `trigger` ended the mode `old`; `slip_may_be_gone` (P,) masks which
+    points may count as without slip. Returns the choice, the chosen mode's margins
+    (m/s^2), the points resting and without slip, and the geometry."""
     from jaxrb.contact._select import _candidate, select_mode
 
-    shape = jaxrb.Box(jnp.full(3, 0.008))
-    model = contact_model(shape)
-    body = jaxrb.RigidBody(0.0045, shape=shape)
-    scene = jaxrb.Scene(body, (jaxrb.Gravity(),), floor=jaxrb.Floor(restitution, friction))
+    model = contact_model(scene.body.shape)
     geom = geometry(state, scene, model, old.seed, old.side)
     flat = jnp.asarray(model.flat_points)
     touching = geom.gap <= jnp.where(flat, TOL.flat, TOL.contact)
     resting = touching & (jnp.abs(geom.gap_rate) <= TOL.slip_stop)
     zero_slip = (jnp.linalg.norm(geom.slip, axis=-1) <= TOL.slip_stop) & slip_may_be_gone
-    t = 0.3142465116295643
     table = CandidateTable(model)
     args = (t, state, geom, old, trigger, scene, model, table, TOL, resting, zero_slip)
     chosen = select_mode(*args)
     tested = _candidate(t, state, geom, chosen.mode, scene, model, TOL, resting, zero_slip, True)
-    return chosen, tested[1], resting, zero_slip
+    return chosen, tested[1], resting, zero_slip, geom
+
+
+def _throw_scene(kind, restitution, friction):
+    """The scene of a throw of `kind` in `contact_throws` on a floor (restitution, friction)."""
+    mass, make_shape, _, _ = shape_of(kind)
+    body = jaxrb.RigidBody(mass, shape=make_shape())
+    return jaxrb.Scene(body, (jaxrb.Gravity(),), floor=jaxrb.Floor(restitution, friction))
+
+
+@persistent
+def _edge_choice(state, restitution, friction, old, trigger, slip_may_be_gone):
+    """`_choice_at_event` for the die of `contact_throws` 875 at 0.3142465116295643 s, less
+    the geometry."""
+    scene = _throw_scene("die", restitution, friction)
+    t = 0.3142465116295643
+    return _choice_at_event(t, state, scene, old, trigger, slip_may_be_gone)[:4]
 
 
 def test_an_edge_whose_end_lifts_as_the_other_ends_slip_stops_has_a_consistent_mode():
@@ -542,7 +554,7 @@ def test_an_edge_whose_end_lifts_as_the_other_ends_slip_stops_has_a_consistent_m
         flight_mode(jnp.float64),
         (jnp.array(PAIR, jnp.int32), jnp.array(1, jnp.int32), jnp.array(5, jnp.int32)),
     )
-    model = contact_model(jaxrb.Box(jnp.full(3, 0.008)))
+    model = contact_model(shape_of("die")[1]())
     lift_off_b = jnp.array(model.num_points + 1)  # NORMAL_B: end b's normal force
     every = jnp.ones(model.num_points, bool)
     chosen, margins, resting, zero_slip = _edge_choice(state, e, mu, old, lift_off_b, every)
@@ -574,29 +586,16 @@ CONE_EDGE_OF_A_PIVOTING_EDGE = (
 
 @persistent
 def _cone_edge_choice(state, restitution, friction, old, trigger):
-    """`select_mode` for the d12 of `contact_throws` at `state` after the event `trigger`
-    ended the mode `old`, the chosen mode's margins (m/s^2), and the friction (world, N)
-    and normal force (N) at `old`'s end a in `old` itself."""
-    from jaxrb.contact._select import _candidate, select_mode
-
-    mass, make_shape, _, _ = shape_of("d12")
-    shape = make_shape()
-    model = contact_model(shape)
-    body = jaxrb.RigidBody(mass, shape=shape)
-    scene = jaxrb.Scene(body, (jaxrb.Gravity(),), floor=jaxrb.Floor(restitution, friction))
-    geom = geometry(state, scene, model, old.seed, old.side)
-    flat = jnp.asarray(model.flat_points)
-    touching = geom.gap <= jnp.where(flat, TOL.flat, TOL.contact)
-    resting = touching & (jnp.abs(geom.gap_rate) <= TOL.slip_stop)
-    zero_slip = jnp.linalg.norm(geom.slip, axis=-1) <= TOL.slip_stop
+    """`_choice_at_event` for the d12 of `contact_throws` 69 at 0.7010875018938936 s: the
+    choice, the chosen mode's margins (m/s^2), and the friction (world, N) and normal force
+    (N) at `old`'s end a in `old` itself."""
+    scene = _throw_scene("d12", restitution, friction)
     t = 0.7010875018938936
-    table = CandidateTable(model)
-    args = (t, state, geom, old, trigger, scene, model, table, TOL, resting, zero_slip)
-    chosen = select_mode(*args)
-    tested = _candidate(t, state, geom, chosen.mode, scene, model, TOL, resting, zero_slip, True)
+    chosen, margins, _, _, geom = _choice_at_event(t, state, scene, old, trigger)
+    model = contact_model(scene.body.shape)
     held = solve_mode(t, state, old, scene, model, TOL, geom=geom)
     d = held.rows.J[:, :3]
-    return chosen, tested[1], held.lam[2] * d[2] + held.lam[3] * d[3], held.lam[0]
+    return chosen, margins, held.lam[2] * d[2] + held.lam[3] * d[3], held.lam[0]
 
 
 def test_a_pivoting_edge_whose_sticking_end_reaches_the_cone_slides_on_from_rest():
