@@ -8,7 +8,8 @@ caches; XLA's CPU settings as `jaxrb.speed_up_compilation` sets them, for both s
 
 - a free body (I = diag(1, 2, 3) kg m^2, omega0 (1, 0.5, 0.8) rad/s, 11 saves over 20 s,
   Tsit5 at rtol = atol = 1e-8): `jaxrb.simulate`'s first call against `diffrax.diffeqsolve`
-  of a hand-written 7-number right-hand side (quaternion and body-frame omega), both jitted
+  of B1's hand-written 7-number right-hand side (`b1_torque_free.plain_rhs`: quaternion and
+  body-frame omega), both jitted
   with the initial omega and the save times as arguments;
 - the first reverse-mode gradient of the final omega_x with respect to omega0, both ways
   (diffrax's default `RecursiveCheckpointAdjoint`);
@@ -25,11 +26,14 @@ import json
 import statistics
 import subprocess
 import sys
+from pathlib import Path
 
 try:
     from . import _common as C
 except ImportError:
     import _common as C  # type: ignore
+
+REPOSITORY = Path(__file__).resolve().parents[1]
 
 # One process per measurement: the program below, with CASE set to one of CASES.
 PROGRAM = r"""
@@ -41,28 +45,20 @@ import jax.numpy as jnp
 import jaxrb
 jaxrb.speed_up_compilation(cache=False)
 CASE = sys.argv[1]
+from benchmarks.b1_torque_free import plain_rhs
 I = jnp.array([1.0, 2.0, 3.0])
 ts = jnp.linspace(0.0, 20.0, 11)
 w0 = jnp.array([1.0, 0.5, 0.8])
 scene = jaxrb.Scene(jaxrb.RigidBody(1.0, jnp.diag(I)))
 
-def rhs(t, y, args):
-    q, w = y[:4], y[4:]
-    qd = 0.5 * jnp.stack([
-        -q[1] * w[0] - q[2] * w[1] - q[3] * w[2],
-        q[0] * w[0] + q[2] * w[2] - q[3] * w[1],
-        q[0] * w[1] - q[1] * w[2] + q[3] * w[0],
-        q[0] * w[2] + q[1] * w[1] - q[2] * w[0],
-    ])
-    return jnp.concatenate([qd, jnp.cross(I * w, w) / I])
-
 def plain(w, ts):
-    y0 = jnp.concatenate([jnp.array([1.0, 0.0, 0.0, 0.0]), w])
+    y0 = (jnp.array([1.0, 0.0, 0.0, 0.0]), w)
     sol = dfx.diffeqsolve(
-        dfx.ODETerm(rhs), dfx.Tsit5(), ts[0], ts[-1], None, y0, saveat=dfx.SaveAt(ts=ts),
-        stepsize_controller=dfx.PIDController(rtol=1e-8, atol=1e-8), max_steps=100_000,
+        dfx.ODETerm(plain_rhs(I)), dfx.Tsit5(), ts[0], ts[-1], None, y0,
+        saveat=dfx.SaveAt(ts=ts), stepsize_controller=dfx.PIDController(rtol=1e-8, atol=1e-8),
+        max_steps=100_000,
     )
-    return sol.ys[-1, 4:]
+    return sol.ys[1][-1]
 
 def ours(w, ts):
     return jaxrb.simulate(scene, jaxrb.make_state(omega=w), ts).states.omega[-1]
@@ -105,7 +101,11 @@ CASES = [
 def measure(case: str) -> dict:
     """One cold first call in a fresh process (no caches): its stages (s) and size."""
     out = subprocess.run(
-        [sys.executable, "-c", PROGRAM, case], capture_output=True, text=True, check=True
+        [sys.executable, "-c", PROGRAM, case],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=REPOSITORY,  # where `benchmarks` imports from
     )
     return json.loads(out.stdout.strip().splitlines()[-1])
 
