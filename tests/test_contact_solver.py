@@ -26,6 +26,7 @@ from jaxrb.contact._modes import (
     sliding_solver,
     solve_mode,
 )
+from jaxrb.contact._resting import resting_points, touching_points
 from jaxrb.contact._select import relative_accelerations
 
 TOL = jaxrb.contact.ContactOptions().resolved(jnp.float64)
@@ -442,10 +443,8 @@ def _choices(which, states, friction):
     def one(state, mu):
         scene = _scene(shape, mu)
         geom = geometry(state, scene, model, old.seed, old.side)
-        flat = jnp.asarray(model.flat_points)
-        touching = geom.gap <= jnp.where(flat, TOL.flat, TOL.contact)
-        resting = touching & (jnp.abs(geom.gap_rate) <= TOL.slip_stop)
-        zero_slip = jnp.linalg.norm(geom.slip, axis=-1) <= TOL.slip_stop
+        touching = touching_points(geom, model, old, TOL)
+        resting, zero_slip = resting_points(touching, geom, model, TOL)
         args = (0.0, state, geom, old, trigger, scene, model, table, TOL, resting, zero_slip)
         chosen = select_mode(*args)
         # every mode of the table, the first consistent one with no rival taken
@@ -510,10 +509,8 @@ def _choice_at_event(t, state, scene, old, trigger, slip_may_be_gone=True):
 
     model = contact_model(scene.body.shape)
     geom = geometry(state, scene, model, old.seed, old.side)
-    flat = jnp.asarray(model.flat_points)
-    touching = geom.gap <= jnp.where(flat, TOL.flat, TOL.contact)
-    resting = touching & (jnp.abs(geom.gap_rate) <= TOL.slip_stop)
-    zero_slip = (jnp.linalg.norm(geom.slip, axis=-1) <= TOL.slip_stop) & slip_may_be_gone
+    resting, zero_slip = resting_points(touching_points(geom, model, old, TOL), geom, model, TOL)
+    zero_slip = zero_slip & slip_may_be_gone
     table = CandidateTable(model)
     args = (t, state, geom, old, trigger, scene, model, table, TOL, resting, zero_slip)
     chosen = select_mode(*args)
@@ -585,17 +582,17 @@ CONE_EDGE_OF_A_PIVOTING_EDGE = (
 
 
 @persistent
-def _cone_edge_choice(state, restitution, friction, old, trigger):
-    """`_choice_at_event` for the d12 of `contact_throws` 69 at 0.7010875018938936 s: the
-    choice, the chosen mode's margins (m/s^2), and the friction (world, N) and normal force
-    (N) at `old`'s end a in `old` itself."""
+def _d12_choice(t, state, restitution, friction, old, trigger):
+    """`_choice_at_event` for a d12 of `contact_throws` at time `t` (s): the choice, the
+    chosen mode's margins (m/s^2), the points resting, their gap rates (m/s), and the
+    friction (world, N) and normal force (N) at `old`'s end a in `old` itself."""
     scene = _throw_scene("d12", restitution, friction)
-    t = 0.7010875018938936
-    chosen, margins, _, _, geom = _choice_at_event(t, state, scene, old, trigger)
+    chosen, margins, resting, _, geom = _choice_at_event(t, state, scene, old, trigger)
     model = contact_model(scene.body.shape)
     held = solve_mode(t, state, old, scene, model, TOL, geom=geom)
     d = held.rows.J[:, :3]
-    return chosen, margins, held.lam[2] * d[2] + held.lam[3] * d[3], held.lam[0]
+    friction_a = held.lam[2] * d[2] + held.lam[3] * d[3]
+    return chosen, margins, resting, geom.gap_rate, friction_a, held.lam[0]
 
 
 def test_a_pivoting_edge_whose_sticking_end_reaches_the_cone_slides_on_from_rest():
@@ -622,7 +619,8 @@ def test_a_pivoting_edge_whose_sticking_end_reaches_the_cone_slides_on_from_rest
     )
     num_points = contact_model(shape_of("d12")[1]()).num_points
     cone_a = jnp.array(num_points + CONE_A)
-    chosen, margins, friction_a, normal_a = _cone_edge_choice(state, e, mu, old, cone_a)
+    t = 0.7010875018938936
+    chosen, margins, _, _, friction_a, normal_a = _d12_choice(t, state, e, mu, old, cone_a)
     # the event left end 5's friction on the cone's edge
     friction_a, normal_a = np.asarray(friction_a), float(normal_a)
     assert normal_a > 0
@@ -634,6 +632,53 @@ def test_a_pivoting_edge_whose_sticking_end_reaches_the_cone_slides_on_from_rest
     assert np.asarray(mode.from_rest).tolist() == [True, False]
     start = np.asarray(mode.slide_dir[0])
     np.testing.assert_allclose(start, -friction_a / np.linalg.norm(friction_a), atol=1e-9)
+    used = np.abs(np.asarray(margins)) < 1e29
+    assert np.all(np.asarray(margins)[used] >= -1e-12), margins
+
+
+# d12 248 of `contact_throws --n 300` (seed 0) at 1.434229447508761 s: position, unit
+# quaternion, velocity (world), angular velocity (body) as the event found them
+FACE_COMING_DOWN_ABOUT_A_VERTEX = (
+    (0.15283519720449026, -0.1458471105790759, 0.01002164753073356),
+    (-0.6849346153877226, -0.5095364858162511, -0.4902780374745075, 0.17568320419392158),
+    (-1.3272523434535835e-05, 1.2157560374390823e-05, 9.930397344672713e-06),
+    (-0.0006485490399038333, -0.0010493743899353117, 0.000400825350031595),
+)
+
+
+def test_a_face_whose_far_vertices_separate_slowly_comes_down_flat():
+    """d12 248 of `contact_throws` slid on vertex 4 until its slip stopped. Every vertex of
+    face 8 (4, 5, 14, 18, 19) touches; 4, 14 and 18 rest, but 5 and 19, the furthest from
+    vertex 4, separate faster than `slip_stop`: a rigid face's normal velocities are an
+    affine function of the point, so three vertices at rest leave the others up to a few
+    times `slip_stop`. Counted as resting with the rest of their face, the face's sticking
+    mode is consistent; without them no mode was (vertex 4 alone let 14 and 18 sink at 1.9
+    m/s^2)."""
+    states, restitution, friction = throws(300, 0)
+    e, mu = restitution[248], friction[248]
+    state = jaxrb.State(*map(jnp.asarray, FACE_COMING_DOWN_ABOUT_A_VERTEX))
+    state = eqx.tree_at(lambda s: s.quat, state, state.quat / jnp.linalg.norm(state.quat))
+    vertex_4 = jnp.array(4, jnp.int32)
+    old = eqx.tree_at(
+        lambda m: (m.kind, m.a, m.b),
+        flight_mode(jnp.float64),
+        (jnp.array(POINT, jnp.int32), vertex_4, vertex_4),
+    )
+    model = contact_model(shape_of("d12")[1]())
+    slip_a = jnp.array(model.num_points + SLIP_A)
+    chosen, margins, resting, gap_rate, _, _ = _d12_choice(
+        1.434229447508761, state, e, mu, old, slip_a
+    )
+    face = [sorted(points) for points in model.face_points].index([4, 5, 14, 18, 19])
+    on_face = np.isin(np.arange(model.num_points), [4, 5, 14, 18, 19])
+    np.testing.assert_array_equal(np.asarray(resting), on_face)
+    gap_rate = np.abs(np.asarray(gap_rate))
+    assert np.all(gap_rate[[4, 14, 18]] <= TOL.slip_stop)
+    assert np.all(gap_rate[[5, 19]] > TOL.slip_stop)  # what the face's rule is for
+    assert bool(chosen.consistent)
+    mode = chosen.mode
+    assert (int(mode.kind), int(mode.face)) == (FACE, face)
+    assert bool(mode.stick[0])
     used = np.abs(np.asarray(margins)) < 1e29
     assert np.all(np.asarray(margins)[used] >= -1e-12), margins
 

@@ -11,6 +11,7 @@ The formulation is in docs/contact.md. One concern per file:
 - `_step_end.py`, `_step_limit.py`: the event function and step limit carried at step ends,
   and the steps cut to that limit;
 - `_event_root.py`: the event's time on the last step's dense output, and its cause;
+- `_resting.py`: which points touch, rest and have stopped slipping at an event;
 - `_select.py`: the next mode at an event (enumeration of candidate modes);
 - `_impact_law.py`: Newton's restitution with Coulomb friction at all touching points;
 - `_projection.py`: positions and velocities projected onto the active constraints;

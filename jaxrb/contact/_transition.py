@@ -7,7 +7,6 @@ import jax.numpy as jnp
 
 from .._dynamics import accelerations
 from .._invariants import energy
-from .._quaternion import _safe_norm
 from .._state import State
 from ._events import COP, JUNCTION
 from ._impact_law import (
@@ -25,7 +24,6 @@ from ._modes import (
     FACE,
     CandidateTable,
     Mode,
-    active_points,
     cross,
     geometry,
     no_derivative,
@@ -39,6 +37,7 @@ from ._modes import (
     unit_state,
 )
 from ._projection import project
+from ._resting import resting_points, touching_points
 from ._select import select_mode
 
 # the order in which `at_event` solves the impact variants: each one's need is known from
@@ -101,7 +100,7 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol, live=True) -> 
     energy0 = energy(scene, state)
     geom = geometry(state, scene, model, mode.seed)
     flat = jnp.asarray(model.flat_points)
-    touching = (geom.gap <= jnp.where(flat, tol.flat, tol.contact)) | active_points(model, mode)
+    touching = touching_points(geom, model, mode, tol)
     # the impact points (a coin's caps: rings of rim points) and which of them touch; on a
     # surface of several parts they are the contact points, each with its part's frame
     several = scene.floor.parts > 1
@@ -200,8 +199,7 @@ def at_event(t, y: State, mode: Mode, trigger, scene, model, tol, live=True) -> 
     side = jnp.where(crossed, -mode.side, jnp.where(region >= 0, 1.0, -1.0)).astype(dtype)
     mode = eqx.tree_at(lambda m: m.side, mode, side)
     geom = geometry(state, scene, model, mode.seed, mode.side)
-    resting = touching & (jnp.abs(geom.gap_rate) <= tol.slip_stop)
-    zero_slip = _safe_norm(geom.slip) <= tol.slip_stop
+    resting, zero_slip = resting_points(touching, geom, model, tol)
     trigger = jnp.where(impact, -1, trigger)
     # the choice of mode is discrete; of its continuous parts (the direction a slide from
     # rest starts in, a flat cap's seed) no derivative is taken: that keeps the reverse pass
