@@ -6,6 +6,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 from programs import persistent
 from turning_states import first_face_down, flat_turning_states
 
@@ -636,45 +637,67 @@ def test_a_pivoting_edge_whose_sticking_end_reaches_the_cone_slides_on_from_rest
     assert np.all(np.asarray(margins)[used] >= -1e-12), margins
 
 
-# d12 248 of `contact_throws --n 300` (seed 0) at 1.434229447508761 s: position, unit
-# quaternion, velocity (world), angular velocity (body) as the event found them
-FACE_COMING_DOWN_ABOUT_A_VERTEX = (
-    (0.15283519720449026, -0.1458471105790759, 0.01002164753073356),
-    (-0.6849346153877226, -0.5095364858162511, -0.4902780374745075, 0.17568320419392158),
-    (-1.3272523434535835e-05, 1.2157560374390823e-05, 9.930397344672713e-06),
-    (-0.0006485490399038333, -0.0010493743899353117, 0.000400825350031595),
-)
+# d12s of `contact_throws --n 300` (seed 0) at an event as a vertex's slip stopped: the
+# member, the time (s), the state (position, unit quaternion, velocity in the world frame,
+# angular velocity in the body frame), the vertex the die slid on, its face's vertices
+FACES_COMING_DOWN_ABOUT_A_VERTEX = {
+    "d12 248": (
+        248,
+        1.434229447508761,
+        (
+            (0.15283519720449026, -0.1458471105790759, 0.01002164753073356),
+            (-0.6849346153877226, -0.5095364858162511, -0.4902780374745075, 0.17568320419392158),
+            (-1.3272523434535835e-05, 1.2157560374390823e-05, 9.930397344672713e-06),
+            (-0.0006485490399038333, -0.0010493743899353117, 0.000400825350031595),
+        ),
+        4,
+        (4, 5, 14, 18, 19),
+    ),
+    "d12 251": (
+        251,
+        1.802328510965913,
+        (
+            (0.07050454362308915, -0.4919951352437769, 0.010021647904730839),
+            (-0.40763117174614555, 0.7057986429366752, -0.042991576253351906, -0.577786143673301),
+            (-1.2807172761601494e-05, -1.5992334964595912e-05, 1.1832155763218409e-05),
+            (2.0609656633677562e-16, -5.2422250276817324e-17, -0.0015455038674873501),
+        ),
+        15,
+        (6, 7, 15, 18, 19),
+    ),
+}
 
 
-def test_a_face_whose_far_vertices_separate_slowly_comes_down_flat():
-    """d12 248 of `contact_throws` slid on vertex 4 until its slip stopped. Every vertex of
-    face 8 (4, 5, 14, 18, 19) touches; 4, 14 and 18 rest, but 5 and 19, the furthest from
-    vertex 4, separate faster than `slip_stop`: a rigid face's normal velocities are an
-    affine function of the point, so three vertices at rest leave the others up to a few
-    times `slip_stop`. Counted as resting with the rest of their face, the face's sticking
-    mode is consistent; without them no mode was (vertex 4 alone let 14 and 18 sink at 1.9
-    m/s^2)."""
-    states, restitution, friction = throws(300, 0)
-    e, mu = restitution[248], friction[248]
-    state = jaxrb.State(*map(jnp.asarray, FACE_COMING_DOWN_ABOUT_A_VERTEX))
+@pytest.mark.parametrize("throw", sorted(FACES_COMING_DOWN_ABOUT_A_VERTEX))
+def test_a_face_whose_far_vertices_rise_slowly_comes_down_flat(throw):
+    """A d12 slid on a vertex until its slip stopped, a face of that vertex nearly flat on
+    the floor: three of the face's vertices rest, but the two furthest from the pivot rise
+    faster than `slip_stop` (d12 248: both within `contact_tol`; d12 251: 1.1e-9 m up,
+    just beyond it). A rigid face's gaps and normal velocities are affine functions of the
+    point, so three vertices within the tolerances of rest leave the others within
+    `face_reach` times them (2 + sqrt(5) on a regular pentagon). Counted as resting with
+    the rest of their face, the face's sticking mode is consistent; without them no mode
+    was (the pivot alone let the face's other vertices sink at 1.9 m/s^2)."""
+    member, t, state, pivot, face_points = FACES_COMING_DOWN_ABOUT_A_VERTEX[throw]
+    _, restitution, friction = throws(300, 0)
+    state = jaxrb.State(*map(jnp.asarray, state))
     state = eqx.tree_at(lambda s: s.quat, state, state.quat / jnp.linalg.norm(state.quat))
-    vertex_4 = jnp.array(4, jnp.int32)
+    at_pivot = jnp.array(pivot, jnp.int32)
     old = eqx.tree_at(
         lambda m: (m.kind, m.a, m.b),
         flight_mode(jnp.float64),
-        (jnp.array(POINT, jnp.int32), vertex_4, vertex_4),
+        (jnp.array(POINT, jnp.int32), at_pivot, at_pivot),
     )
     model = contact_model(shape_of("d12")[1]())
     slip_a = jnp.array(model.num_points + SLIP_A)
     chosen, margins, resting, gap_rate, _, _ = _d12_choice(
-        1.434229447508761, state, e, mu, old, slip_a
+        t, state, restitution[member], friction[member], old, slip_a
     )
-    face = [sorted(points) for points in model.face_points].index([4, 5, 14, 18, 19])
-    on_face = np.isin(np.arange(model.num_points), [4, 5, 14, 18, 19])
+    face = [sorted(points) for points in model.face_points].index(list(face_points))
+    on_face = np.isin(np.arange(model.num_points), face_points)
     np.testing.assert_array_equal(np.asarray(resting), on_face)
-    gap_rate = np.abs(np.asarray(gap_rate))
-    assert np.all(gap_rate[[4, 14, 18]] <= TOL.slip_stop)
-    assert np.all(gap_rate[[5, 19]] > TOL.slip_stop)  # what the face's rule is for
+    rising = np.abs(np.asarray(gap_rate))[on_face] > TOL.slip_stop
+    assert 1 <= rising.sum() <= len(face_points) - 3  # what the face's rule is for
     assert bool(chosen.consistent)
     mode = chosen.mode
     assert (int(mode.kind), int(mode.face)) == (FACE, face)
