@@ -85,6 +85,12 @@ class AbstractContactModel(eqx.Module):
     def num_faces(self) -> int:
         return len(self.face_points)
 
+    def face_reach(self):
+        """(max(F, 1),) per face, the factor by which a function affine on it (a gap, a gap
+        rate) can exceed its largest magnitude at three of its points elsewhere on it (see
+        `_face_reach`); 1 for a face of fewer than three points (a cap's two)."""
+        return jnp.ones(max(self.num_faces, 1))
+
 
 class SphereContact(AbstractContactModel):
     """A ball: one contact point per part of the surface (`parts`), each the ball's point
@@ -160,15 +166,42 @@ def _polygon_mean_distance(vertices, centre):
     return total / area
 
 
+def _face_reach(corners, face_points):
+    """(F,) for each face of `corners` (P, 3) listed by `face_points`: the largest sum of the
+    absolute barycentric coordinates of one of its points with respect to three others, the
+    factor by which a function affine on the face can exceed its largest magnitude at three
+    points elsewhere on it: 1 on a triangle, 3 on a parallelogram, 2 + sqrt(5) on a regular
+    pentagon. Three points in a line (which do not fix the face's plane) are left out."""
+    combos = [
+        (f, tri, k)
+        for f, points in enumerate(face_points)
+        for tri in itertools.combinations(points, 3)
+        for k in points
+    ]
+    face, tri, k = (np.asarray(x) for x in zip(*combos, strict=True))
+    v0, v1, v2, p = corners[tri[:, 0]], corners[tri[:, 1]], corners[tri[:, 2]], corners[k]
+    n = jnp.cross(v1 - v0, v2 - v0)
+    twice_area = jnp.sum(n * n, axis=-1)
+    weights = jnp.stack(
+        [jnp.cross(v1 - p, v2 - p), jnp.cross(v2 - p, v0 - p), jnp.cross(v0 - p, v1 - p)]
+    )
+    spread = twice_area > 0
+    reach = jnp.sum(jnp.abs(jnp.sum(weights * n, axis=-1)), axis=0)
+    reach = jnp.where(spread, reach / jnp.where(spread, twice_area, 1.0), 1.0)
+    of_face = face[None, :] == np.arange(len(face_points))[:, None]
+    return jnp.max(jnp.where(of_face, reach, 1.0), axis=1)
+
+
 class CornerContact(AbstractContactModel):
     """A solid whose contact points are its corners (fixed on the body) and whose faces are
     polygons: `corners` (P, 3); per face its outward `normals`, `centres` and friction radii
-    `rho` (body frame, m)."""
+    `rho` (body frame, m), and `reach` (`face_reach`)."""
 
     corners: jnp.ndarray
     normals: jnp.ndarray
     centres: jnp.ndarray
     rho: jnp.ndarray
+    reach: jnp.ndarray
 
     moving_points = False
 
@@ -177,6 +210,9 @@ class CornerContact(AbstractContactModel):
 
     def face_frame(self):
         return self.normals, self.centres, self.rho
+
+    def face_reach(self):
+        return self.reach
 
 
 class BoxContact(CornerContact):
@@ -198,6 +234,7 @@ class BoxContact(CornerContact):
         self.normals = jnp.stack([sign * eye[axis] for axis, sign in _BOX_FACE_AXES])
         self.centres = self.normals * a + shape.offset
         self.rho = _polygon_mean_distance(self.corners[np.asarray(_BOX_FACES)], self.centres)
+        self.reach = _face_reach(self.corners, self.face_points)
 
     def cop_margin(self, face, normal_force, couple):
         # the face of `axis` is bounded by |x_j| <= a_j, |x_k| <= a_k; the centre of pressure
@@ -336,6 +373,7 @@ class PolyhedronContact(CornerContact):
             used.append((True,) * len(f) + (False,) * pad)
         self.centres = jnp.stack(centres) + shape.offset
         self.rho = jnp.stack(rhos)
+        self.reach = _face_reach(self.corners, self.face_points)
         self.edge_normals = jnp.stack(m_all)
         self.edge_distances = jnp.stack(h_all)
         self.edge_used = tuple(used)

@@ -2,14 +2,11 @@
 touch with no normal velocity, every point of a face that has come down flat, and those
 whose slip is gone."""
 
-from itertools import combinations
-
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from .._quaternion import _safe_norm
-from ._modes import active_points, cross, face_point_masks
+from ._modes import active_points, face_point_masks
 
 # a face may rest as a whole when this many of its points rest
 RESTING_OF_A_FACE = 3
@@ -22,42 +19,13 @@ def touching_points(geom, model, mode, tol) -> jax.Array:
     return (geom.gap <= jnp.where(flat, tol.flat, tol.contact)) | active_points(model, mode)
 
 
-def face_reach(model) -> jax.Array:
-    """(max(F, 1),) for each face of three or more points (corners, body frame): the largest
-    sum of the absolute barycentric coordinates of one of its points with respect to three
-    others, the factor by which a function affine on the face (a gap, a gap rate) can exceed
-    its largest magnitude at three points elsewhere on the face: 1 on a triangle, 3 on a
-    parallelogram, 2 + sqrt(5) on a regular pentagon. 1 for other faces (a cap's two points)."""
-    combos = [
-        (f, tri, k)
-        for f, points in enumerate(model.face_points)
-        if len(points) >= RESTING_OF_A_FACE
-        for tri in combinations(points, 3)
-        for k in points
-    ]
-    if not combos:
-        return jnp.ones(max(model.num_faces, 1))
-    face, tri, k = (np.asarray(x) for x in zip(*combos, strict=True))
-    corners = model.corners
-    v0, v1, v2, p = corners[tri[:, 0]], corners[tri[:, 1]], corners[tri[:, 2]], corners[k]
-    n = cross(v1 - v0, v2 - v0)
-    twice_area = jnp.sum(n * n, axis=-1)
-    weights = jnp.stack([cross(v1 - p, v2 - p), cross(v2 - p, v0 - p), cross(v0 - p, v1 - p)])
-    # (three points of a face in a line do not fix its plane: left out)
-    spread = twice_area > 0
-    reach = jnp.sum(jnp.abs(jnp.sum(weights * n, axis=-1)), axis=0)
-    reach = jnp.where(spread, reach / jnp.where(spread, twice_area, 1.0), 1.0)
-    of_face = face[None, :] == np.arange(max(model.num_faces, 1))[:, None]
-    return jnp.max(jnp.where(of_face, reach, 1.0), axis=1)
-
-
 def resting_points(touching, geom, model, tol) -> tuple[jax.Array, jax.Array]:
     """Masks (P,) of the points that rest and of those whose slip is gone, for the points
     `touching` (P,) at the state of `geom`.
 
     A point rests when it touches and its normal velocity is below `tol.slip_stop` (m/s).
     A face rests as a whole when three of its points rest and its other points are within
-    `face_reach` times the tolerances (`tol.contact`, m; `tol.slip_stop`, m/s): a rigid
+    the model's `face_reach` times the tolerances (`tol.contact`, m; `tol.slip_stop`, m/s): a rigid
     face's gaps and normal velocities are affine functions of the point on it, so three
     points within the tolerances of rest leave the others within that multiple of them, and
     a test point by point cannot tell such a face from one at rest (a d12's pentagon coming
@@ -66,7 +34,7 @@ def resting_points(touching, geom, model, tol) -> tuple[jax.Array, jax.Array]:
     `tol.slip_stop` (m/s)."""
     resting = touching & (jnp.abs(geom.gap_rate) <= tol.slip_stop)
     faces = jnp.asarray(face_point_masks(model))
-    reach = face_reach(model)[:, None]
+    reach = model.face_reach()[:, None]
     near = (geom.gap <= reach * tol.contact) & (jnp.abs(geom.gap_rate) <= reach * tol.slip_stop)
     flat_down = jnp.all(~faces | near, axis=1) & (
         jnp.sum(faces & resting, axis=1) >= RESTING_OF_A_FACE
