@@ -50,6 +50,19 @@ def state_at(kind, n, seed, index, t):
     return scene, jax.tree.map(lambda x: np.asarray(x[-1]), tr.states), int(tr.contact.kind[-1])
 
 
+def vertex_kinematics(scene, state, vertices):
+    """(inertia tensor (3, 3, kg m^2), angular velocity (3,, rad/s), offsets from the mass
+    centre (K, 3, m), slips (K, 3, m/s)) of `vertices` (body-frame offsets (K, 3)) of a
+    body at `state` on the floor (normal +z), all in the world frame."""
+    R = np.asarray(jaxrb.quat_to_matrix(jnp.asarray(state.quat)))
+    inertia = R @ np.asarray(scene.body.inertia_matrix) @ R.T
+    w = R @ np.asarray(state.omega)
+    r = np.asarray(vertices) @ R.T
+    vel = np.asarray(state.vel) + np.cross(w, r)
+    slip = vel * np.array([1.0, 1.0, 0.0])
+    return inertia, w, r, slip
+
+
 def vertex_problem(scene, state, vertices):
     """(A, b, slips) of `vertices` (body-frame offsets from the mass centre (K, 3), m) of a
     body on the floor (normal +z), each vertex with its own Coulomb friction along its own
@@ -58,13 +71,8 @@ def vertex_problem(scene, state, vertices):
     accelerations without contact force (gravity, the gyroscopic and centripetal terms; the
     drag of the mass centre is horizontal here); slips (K, 3) world (m/s)."""
     body, mu = scene.body, float(scene.floor.friction)
-    R = np.asarray(jaxrb.quat_to_matrix(jnp.asarray(state.quat)))
-    inertia = R @ np.asarray(body.inertia_matrix) @ R.T
-    w = R @ np.asarray(state.omega)
-    r = np.asarray(vertices) @ R.T
+    inertia, w, r, slip = vertex_kinematics(scene, state, vertices)
     n = np.array([0.0, 0.0, 1.0])
-    vel = np.asarray(state.vel) + np.cross(w, r)
-    slip = vel - np.outer(vel @ n, n)
     s_hat = slip / np.linalg.norm(slip, axis=1, keepdims=True)
     w_dot = np.linalg.solve(inertia, -np.cross(w, inertia @ w))  # without contact forces
     m_inv = np.zeros((6, 6))

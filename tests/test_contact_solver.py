@@ -1,5 +1,5 @@
 """The mode selection: its sliding solver (`SlidingSolver`: a mode's solution for any sliding
-directions by a 2 x 2 Woodbury update) against the direct 6 x 6 solve, and its choice (the
+directions by a 3 x 3 Woodbury update) against the direct 6 x 6 solve, and its choice (the
 candidates of the resting points, tested a chunk at a time) against testing every mode."""
 
 import equinox as eqx
@@ -12,8 +12,16 @@ from turning_states import first_face_down, flat_turning_states
 
 import jaxrb
 from benchmarks.contact_throws import shape_of, throws
-from benchmarks.face_vertex_lcp import vertex_problem
-from jaxrb.contact._events import CONE_A, SLIP_A, condition_tolerances, slide_end
+from benchmarks.face_vertex_lcp import vertex_kinematics, vertex_problem
+from jaxrb.contact._events import (
+    CONE_A,
+    CONE_B,
+    COP,
+    NUM_FORCE_CONDITIONS,
+    SLIP_A,
+    condition_tolerances,
+    slide_end,
+)
 from jaxrb.contact._features import contact_model
 from jaxrb.contact._modes import (
     FACE,
@@ -24,6 +32,7 @@ from jaxrb.contact._modes import (
     flight_mode,
     geometry,
     held_and_sliding,
+    on_support,
     sliding_solver,
     solve_mode,
 )
@@ -58,9 +67,10 @@ def _moving_state(k1, k2):
 
 @persistent(static_argnames="which")
 def _compare(which, key_data):
-    """Every candidate mode of `SHAPES[which]` at one moving state, with random unit sliding
-    directions drawn from the key (its raw data): (the solver's, the direct solve's)
-    multipliers and accelerations, and the multipliers without friction."""
+    """Every candidate mode of `SHAPES[which]` at one moving state, and every support with
+    its first vertex starting to slide from rest, with random unit sliding directions drawn
+    from the key (its raw data): (the solver's, the direct solve's) multipliers and
+    accelerations, and the multipliers without friction."""
     shape = SHAPES[which]
     key = jax.random.wrap_key_data(key_data)
     scene = _scene(shape)
@@ -68,21 +78,33 @@ def _compare(which, key_data):
     table = CandidateTable(model)
     k1, k2, k3 = jax.random.split(key, 3)
     state = _moving_state(k1, k2)
-    hats = jax.random.normal(k3, (len(table), 3, 3))
+    hats = jax.random.normal(k3, (2 * len(table), 3, 3))
     hats = hats / jnp.linalg.norm(hats, axis=-1, keepdims=True)
     old = flight_mode(jnp.float64)
 
-    def one(i, h):
+    def one(i, h, vertex_starts):
         mode = table.mode(i, old)
+        # (a support whose first vertex starts from rest: its direction moves slots 0-2)
+        starts = vertex_starts & on_support(mode) & ~mode.stick[1]
+        mode = eqx.tree_at(
+            lambda m: (m.b, m.from_rest),
+            mode,
+            (jnp.where(starts, mode.support[0], mode.b), jnp.stack([False, starts])),
+        )
         geom = geometry(state, scene, model, mode.seed, mode.side)
         h = (h[0], h[1], h[2])
         fast = sliding_solver(0.0, state, mode, scene, model, TOL, geom)(h)
         direct = solve_mode(0.0, state, mode, scene, model, TOL, hats=h, geom=geom)
         zero = jnp.zeros(3, jnp.float64)
         plain = solve_mode(0.0, state, mode, scene, model, TOL, hats=(zero,) * 3, geom=geom)
-        # the mode made to stick, built beside the sliding solver, against its direct solve
+        # the mode made to stick (a support's vertex starting from rest: as a pivot), built
+        # beside the sliding solver, against its direct solve
         held, beside = held_and_sliding(0.0, state, mode, scene, model, TOL, geom)
-        stuck = eqx.tree_at(lambda m: m.stick, mode, jnp.ones(2, bool))
+        stuck = eqx.tree_at(
+            lambda m: (m.stick, m.from_rest),
+            mode,
+            (jnp.stack([~starts, True]), jnp.zeros(2, bool)),
+        )
         held_direct = solve_mode(0.0, state, stuck, scene, model, TOL, hats=(zero,) * 3, geom=geom)
         pairs = [
             [(s.lam, s.acc, s.alpha, s.rows.C) for s in (fast, direct)],
@@ -91,15 +113,18 @@ def _compare(which, key_data):
         ]
         return pairs, plain.lam
 
-    return jax.vmap(one)(jnp.arange(len(table)), hats)
+    every = jnp.arange(len(table))
+    starts = jnp.arange(2 * len(table)) >= len(table)
+    return jax.vmap(one)(jnp.concatenate([every, every]), hats, starts)
 
 
 def test_sliding_solver_equals_the_direct_solve():
     """For every candidate mode of a box, a coin and a d12 (stick and slide, points, pairs,
-    faces), the Woodbury update gives the direct solve's contact forces and accelerations
-    to roundoff (1e-9 of their scale); so does the mode made to stick that the mode choice
-    builds beside the sliding solver (`held_and_sliding`), whose sliding solver is the
-    one built alone."""
+    faces, supports, pivots), and every support with a vertex starting from rest, the
+    Woodbury update gives the direct solve's contact forces and accelerations to roundoff
+    (1e-9 of their scale); so does the mode made to stick that the mode choice builds
+    beside the sliding solver (`held_and_sliding`), whose sliding solver is the one built
+    alone."""
     key = jax.random.key(3)
     for which in range(len(SHAPES)):
         key, sub = jax.random.split(key)
@@ -582,12 +607,13 @@ CONE_EDGE_OF_A_PIVOTING_EDGE = (
 )
 
 
-@persistent
-def _d12_choice(t, state, restitution, friction, old, trigger):
-    """`_choice_at_event` for a d12 of `contact_throws` at time `t` (s): the choice, the
-    chosen mode's margins (m/s^2), the points resting, their gap rates (m/s), and the
-    friction (world, N) and normal force (N) at `old`'s end a in `old` itself."""
-    scene = _throw_scene("d12", restitution, friction)
+@persistent(static_argnames="kind")
+def _die_choice(t, state, restitution, friction, old, trigger, kind="d12"):
+    """`_choice_at_event` for a die of `contact_throws` (`kind`, static) at time `t` (s):
+    the choice, the chosen mode's margins (m/s^2), the points resting, their gap rates
+    (m/s), and the friction (world, N) and normal force (N) at `old`'s end a in `old`
+    itself."""
+    scene = _throw_scene(kind, restitution, friction)
     chosen, margins, resting, _, geom = _choice_at_event(t, state, scene, old, trigger)
     model = contact_model(scene.body.shape)
     held = solve_mode(t, state, old, scene, model, TOL, geom=geom)
@@ -621,7 +647,7 @@ def test_a_pivoting_edge_whose_sticking_end_reaches_the_cone_slides_on_from_rest
     num_points = contact_model(shape_of("d12")[1]()).num_points
     cone_a = jnp.array(num_points + CONE_A)
     t = 0.7010875018938936
-    chosen, margins, _, _, friction_a, normal_a = _d12_choice(t, state, e, mu, old, cone_a)
+    chosen, margins, _, _, friction_a, normal_a = _die_choice(t, state, e, mu, old, cone_a)
     # the event left end 5's friction on the cone's edge
     friction_a, normal_a = np.asarray(friction_a), float(normal_a)
     assert normal_a > 0
@@ -690,7 +716,7 @@ def test_a_face_whose_far_vertices_rise_slowly_comes_down_flat(throw):
     )
     model = contact_model(shape_of("d12")[1]())
     slip_a = jnp.array(model.num_points + SLIP_A)
-    chosen, margins, resting, gap_rate, _, _ = _d12_choice(
+    chosen, margins, resting, gap_rate, _, _ = _die_choice(
         t, state, restitution[member], friction[member], old, slip_a
     )
     face = [sorted(points) for points in model.face_points].index(list(face_points))
@@ -704,6 +730,157 @@ def test_a_face_whose_far_vertices_rise_slowly_comes_down_flat(throw):
     assert bool(mode.stick[0])
     used = np.abs(np.asarray(margins)) < 1e29
     assert np.all(np.asarray(margins)[used] >= -1e-12), margins
+
+
+def _vertex_at_rest(scene, state, corners, support, b, start=None):
+    """A face of a die on the floor (normal +z) carried by three of its vertices `support`
+    (indices into `corners`, body-frame offsets from the mass centre, m), one of which, `b`,
+    has no slip, solved here in world coordinates independently of the engine: the
+    vertices' normal forces f (3,) (N) hold their normal accelerations at zero, each vertex
+    but b has Coulomb friction -mu f_i along its own unit slip, and vertex b either starts
+    to slide from rest along the unit vector `start` (friction -mu f_b start) or, with
+    `start` None, sticks: its friction force F (N, world) holds its slip's acceleration at
+    the stabilisation's target, a_t = -beta s_b (docs/contact.md, section 3). Returns (f,
+    F, b's slip acceleration relative to that target, a_t + beta s_b (m/s^2, world))."""
+    body, mu = scene.body, float(scene.floor.friction)
+    inertia, w, r, slip = vertex_kinematics(scene, state, corners)
+    n = np.array([0.0, 0.0, 1.0])
+    sticks = start is None
+    directions = {i: slip[i] / np.linalg.norm(slip[i]) for i in support if i != b}
+    directions[b] = np.zeros(3) if sticks else np.asarray(start)
+
+    def accelerations(x):  # the points' accelerations (P, 3) for unknowns x: f, then F
+        forces = [(i, x[k] * (n - mu * directions[i])) for k, i in enumerate(support)]
+        if sticks:
+            forces.append((b, np.array([x[3], x[4], 0.0])))
+        a = np.array([0.0, 0.0, -9.81]) + sum(f for _, f in forces) / float(body.mass)
+        torque = sum(np.cross(r[i], f) for i, f in forces) - np.cross(w, inertia @ w)
+        alpha = np.linalg.solve(inertia, torque)
+        return a + np.cross(alpha, r) + np.cross(w, np.cross(w, r))
+
+    def conditions(x):  # the normal accelerations of the support; a sticking b's slip's
+        acc = accelerations(x)
+        normal = acc[list(support), 2]
+        return np.concatenate([normal, acc[b, :2] + 20.0 * slip[b, :2]]) if sticks else normal
+
+    size = 5 if sticks else 3
+    base = conditions(np.zeros(size))  # the conditions are affine in the unknowns
+    A = np.stack([conditions(e) - base for e in np.eye(size)], axis=1)
+    x = np.linalg.solve(A, -base)
+    F = np.array([x[3], x[4], 0.0]) if sticks else -mu * x[list(support).index(b)] * start
+    relative = accelerations(x)[b] + TOL.stabilisation * slip[b]
+    return x[:3], F, relative - (relative @ n) * n
+
+
+def _assert_starts_from_rest(chosen, margins, scene, state, vertex, mass):
+    """The chosen mode is a support of the face whose vertex `vertex` starts to slide from
+    rest, along a direction in which its slip accelerates (`_vertex_at_rest`), with the
+    normal forces and margins the engine reports."""
+    P = len(contact_model(scene.body.shape).corners)
+    mode = chosen.mode
+    assert bool(chosen.consistent)
+    assert int(mode.kind) == FACE and int(mode.b) == vertex
+    support = np.asarray(mode.support).tolist()
+    assert vertex in support
+    assert np.asarray(mode.stick).tolist() == [False, False]
+    assert bool(mode.from_rest[1])
+    start = np.asarray(mode.slide_dir[1])
+    corners = np.asarray(contact_model(scene.body.shape).corners)
+    f, _, slip_acc = _vertex_at_rest(scene, state, corners, support, vertex, start)
+    along = slip_acc @ start
+    across = np.cross(start, slip_acc)[2]
+    assert along > 0 and abs(across) <= 1e-12 * along, (along, across)
+    assert np.all(f >= 0)
+    np.testing.assert_allclose(float(margins[P + COP]), f.min() / mass, rtol=1e-9)
+    np.testing.assert_allclose(float(margins[P + NUM_FORCE_CONDITIONS + 1]), along, rtol=1e-9)
+    used = np.abs(np.asarray(margins)) < 1e29
+    assert np.all(np.asarray(margins)[used] >= -1e-12), margins
+
+
+# a d12 of the turning states (`flat_turning_states`, key 5, member 41, friction
+# 0.94415513...) as the slip of vertex 16 stopped, the face sliding on vertices 0, 1, 16:
+# time (s), position, unit quaternion, velocity (world), angular velocity (body)
+SUPPORT_VERTEX_STOPS = (
+    0.004772832187875391,
+    (-1.251322870498424e-05, -1.8077837352727175e-05, 0.010021647279704463),
+    (0.566348034752144, 0.6578945972161324, -0.25918082288977906, 0.42337914867454696),
+    (-8.688444868886096e-05, -0.00022612568805480983, 1.3974105195601398e-13),
+    (-0.02745336353503959, -0.016967111770161632, -2.0415079885322694e-16),
+)
+
+
+def test_a_support_vertex_whose_slip_stops_starts_to_slide_from_rest():
+    """A d12 sliding flat on three vertices of a face (friction 0.944) until vertex 16's
+    slip stopped. No mode with that vertex sticking fits (on every support of it a vertex
+    would pull, or its friction would leave the cone), and the supports with all three
+    sliding need its slip. The next mode is a support with vertex 16 starting to slide
+    from rest along the direction its slip then accelerates in, found by the scan of
+    directions: checked against the vertices' contact problem solved here. Before this mode
+    no candidate fitted, and the least inconsistent one chattered 16 times in 2.2 us."""
+    t, *state = SUPPORT_VERTEX_STOPS
+    state = jaxrb.State(*map(jnp.asarray, state))
+    state = eqx.tree_at(lambda s: s.quat, state, state.quat / jnp.linalg.norm(state.quat))
+    mu = 0.9441551327475222
+    model = contact_model(shape_of("d12")[1]())
+    old = eqx.tree_at(
+        lambda m: (m.kind, m.support),
+        flight_mode(jnp.float64),
+        (jnp.array(FACE, jnp.int32), jnp.array([0, 1, 16], jnp.int32)),
+    )
+    slip_a = jnp.array(model.num_points + SLIP_A)
+    chosen, margins, resting, _, _, _ = _die_choice(t, state, 0.5, mu, old, slip_a)
+    assert np.flatnonzero(np.asarray(resting)).tolist() == [0, 1, 12, 16, 17]
+    scene = _throw_scene("d12", 0.5, mu)
+    plain = jax.tree.map(np.asarray, state)
+    _assert_starts_from_rest(chosen, margins, scene, plain, 16, float(scene.body.mass))
+
+
+@pytest.mark.parametrize("spin", [1.0, 20.0])
+def test_a_face_turning_about_a_vertex_pivots_until_the_vertex_cannot_hold_it(spin):
+    """A d20 flat on a face, turning about one of its vertices at `spin` rad/s (friction
+    0.5). Slowly (1 rad/s) the vertex sticks, a pivot whose friction stays inside its cone
+    while the face's two other vertices of a support slide; fast (20 rad/s) the
+    centripetal force the pivot would need leaves the cone on every support of it, and the
+    vertex starts to slide from rest. Both checked against the vertices' contact problem
+    solved here."""
+    model = contact_model(shape_of("d20")[1]())
+    face = sorted(model.face_points[0])
+    base, world = first_face_down(model)
+    vertex = face[0]
+    up = np.array([0.0, 0.0, 1.0])
+    w = spin * up
+    state = jaxrb.State(
+        jnp.array([0.0, 0.0, -np.min(world[:, 2])]),
+        base,
+        jnp.asarray(np.cross(w, -world[vertex])),
+        jaxrb.quat_to_matrix(base).T @ jnp.asarray(w),
+    )
+    mu = 0.5
+    chosen, margins, resting, _, _, _ = _die_choice(
+        0.0, state, 0.5, mu, flight_mode(jnp.float64), jnp.array(-1), kind="d20"
+    )
+    assert np.flatnonzero(np.asarray(resting)).tolist() == face
+    scene = _throw_scene("d20", 0.5, mu)
+    mass = float(scene.body.mass)
+    plain = jax.tree.map(np.asarray, state)
+    corners = np.asarray(model.corners)
+    # the vertex as a pivot on the face's only support (a triangle: its three vertices)
+    f, F, _ = _vertex_at_rest(scene, plain, corners, face, vertex)
+    cone = mu * f[face.index(vertex)] - np.linalg.norm(F)
+    if spin < 10:
+        mode = chosen.mode
+        assert bool(chosen.consistent) and int(mode.kind) == FACE
+        assert np.asarray(mode.support).tolist() == face and int(mode.b) == vertex
+        assert np.asarray(mode.stick).tolist() == [False, True]
+        assert np.all(f >= 0) and cone > 0
+        P = model.num_points
+        np.testing.assert_allclose(float(margins[P + COP]), f.min() / mass, rtol=1e-9)
+        np.testing.assert_allclose(float(margins[P + CONE_B]), cone / mass, rtol=1e-9)
+        used = np.abs(np.asarray(margins)) < 1e29
+        assert np.all(np.asarray(margins)[used] >= -1e-12), margins
+    else:
+        assert cone < 0  # no pivot can hold it
+        _assert_starts_from_rest(chosen, margins, scene, plain, vertex, mass)
 
 
 def test_a_shape_without_pairs_has_no_pair_search_in_its_program(monkeypatch):
@@ -744,7 +921,8 @@ def _support_forces(states, friction, support):
     table = CandidateTable(model)
 
     def one(state, mu, support):
-        i = jnp.argmax(jnp.all(jnp.asarray(table.support) == support, axis=1))
+        plain = ~jnp.asarray(table.stick)[:, 1]  # all three vertices sliding, no pivot
+        i = jnp.argmax(jnp.all(jnp.asarray(table.support) == support, axis=1) & plain)
         mode = table.mode(i, flight_mode(jnp.float64))
         sol = solve_mode(0.0, state, mode, _scene(shape, mu), model, TOL)
         return sol.rows.support_map @ sol.lam[:3]
@@ -770,6 +948,7 @@ def test_a_face_that_cannot_slide_flat_on_its_limit_surface_slides_on_three_vert
     assert np.all(np.asarray(consistent))
     on_support = np.asarray(chosen.support[:, 0]) >= 0
     assert np.all(np.asarray(chosen.kind)[on_support] == FACE)
+    assert not np.any(np.asarray(chosen.stick)[on_support, 1])  # no vertex at rest here
     assert on_support.sum() >= 10, on_support.sum()
     forces = np.asarray(_support_forces(states, friction, chosen.support))
     face = list(model.face_points[0])

@@ -38,8 +38,10 @@ from ._modes import (
     Solution,
     active_points,
     blend_direction,
+    on_pivot,
     on_support,
     point_coefficients,
+    support_vertex_starts,
 )
 
 NORMAL_A, NORMAL_B, CONE_A, CONE_B, AXIAL, SLIP_A, SLIP_B, COP, JUNCTION = range(9)
@@ -73,6 +75,12 @@ def force_margins(lam, rows, mode, model, geom, mu) -> jax.Array:
         is_face, cone_face, jnp.where(both, mu_a * lam[0] - jnp.abs(lam[2]), cone_point)
     )
     cone_b = jnp.where(both, mu_b * lam[1] - jnp.abs(lam[4]), mu_b * lam[1] - _safe_norm(lam[4:6]))
+    # a face turning about a vertex (point b): that vertex's cone, with its share f_b of the
+    # support's load
+    pivot = on_pivot(mode)
+    vertex_forces = rows.support_map @ lam[:3]
+    pivot_force = vertex_forces @ (mode.support == mode.b).astype(dtype)
+    cone_b = jnp.where(pivot, mu_b * pivot_force - _safe_norm(lam[3:5]), cone_b)
     axial = (
         _sqrt_pos((mu_a * lam[0]) ** 2 - lam[2] ** 2)
         + _sqrt_pos((mu_b * lam[1]) ** 2 - lam[4] ** 2)
@@ -81,13 +89,13 @@ def force_margins(lam, rows, mode, model, geom, mu) -> jax.Array:
     _, t1, t2 = geom.frame_of(0)  # a face meets a plane: one frame
     couple_body = vecmat(lam[1] * t1 + lam[2] * t2, geom.R)
     cop = model.cop_margin(mode.face, lam[0], couple_body) / rows.rho
-    cop = jnp.where(on_support(mode), jnp.min(rows.support_map @ lam[:3]), cop)
+    cop = jnp.where(on_support(mode), jnp.min(vertex_forces), cop)
     return jnp.stack(
         [
             jnp.where(holds, lam[0], big),
             jnp.where(is_pair, lam[1], big),
             jnp.where(holds & stick_a, cone_a, big),
-            jnp.where(is_pair & stick_b, cone_b, big),
+            jnp.where((is_pair & stick_b) | pivot, cone_b, big),
             jnp.where(both, axial, big),
             big,
             big,
@@ -97,10 +105,12 @@ def force_margins(lam, rows, mode, model, geom, mu) -> jax.Array:
 
 
 def slowest_support_vertex(geom, mode) -> jax.Array:
-    """The point index of the slowest sliding vertex of a support (`Mode.support`; any
-    other mode: its point a)."""
+    """The point index of the slowest sliding vertex of a support (`Mode.support`), its
+    vertex `b` left out where that one sticks or starts from rest (its slip is watched at
+    slot b); any other mode: its point a."""
     vertices = jnp.where(on_support(mode), mode.support, mode.a)
-    return vertices[jnp.argmin(_safe_norm(geom.slip[vertices]))]
+    apart = (on_pivot(mode) | support_vertex_starts(mode)) & (vertices == mode.b)
+    return vertices[jnp.argmin(jnp.where(apart, jnp.inf, _safe_norm(geom.slip[vertices])))]
 
 
 def slips_as_twist(mode) -> jax.Array:
@@ -112,15 +122,17 @@ def slips_as_twist(mode) -> jax.Array:
 def mode_slips(sol: Solution, mode):
     """The slips whose end the slip conditions watch (m/s, world; (2, 3)): at slot a a
     point's slip or a face's slip twist (a support: its slowest vertex's slip), at slot b
-    the pair's second point's; whether each slides in `mode` (2,); and the points whose
-    slips they are (2,; slot a's is unused where it watches a face's twist)."""
+    the pair's second point's (a support's vertex starting from rest); whether each slides
+    in `mode` (2,); and the points whose slips they are (2,; slot a's is unused where it
+    watches a face's twist)."""
     kind, geom = mode.kind, sol.geom
     on_face = slips_as_twist(mode)
     holds = (kind == POINT) | (kind == PAIR) | (kind == FACE)
     points = jnp.stack([slowest_support_vertex(geom, mode), mode.b])
     slips = geom.slip[points]
     slips = slips.at[0].set(jnp.where(on_face, sol.rows.twist, slips[0]))
-    sliding = jnp.stack([holds & ~mode.stick[0], (kind == PAIR) & ~mode.stick[1]])
+    sliding_b = ((kind == PAIR) & ~mode.stick[1]) | support_vertex_starts(mode)
+    sliding = jnp.stack([holds & ~mode.stick[0], sliding_b])
     return slips, sliding, points
 
 

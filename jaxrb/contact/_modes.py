@@ -15,12 +15,16 @@ right-hand side, so every mode is the same fixed-size solve.
 Row slots: points and pairs use 0: normal at a, 1: normal at b, 2-3: tangential at a,
 4-5: tangential at b (a pair's tangential rows run across and along its line; a sticking pair
 has only one row along the line, slot 3, since both ends move along it together); a face uses
-0: normal at its centre, 1-2: tilt about t1, t2, 3-4: tangential at its centre, 5: spin.
+0: normal at its centre, 1-2: tilt about t1, t2, 3-4: tangential at its centre, 5: spin (a
+face turning about a vertex: 3-4 tangential at that vertex, no spin row).
 
 A sliding face's friction is either its limit surface about its centre (an ellipsoid in the
 slip twist), or, on a `support` of three of its vertices, each vertex's own Coulomb friction
 opposing its own slip with the vertex's share of the normal load (docs/contact.md, section
-2): the rows are the face's, only the force columns differ.
+2): the rows are the face's, only the force columns differ. One of a support's vertices, the
+mode's point b, may be at rest: sticking, a face turning about it (`on_pivot`: its friction
+is then that vertex's own tangential rows), or starting to slide from rest
+(`support_vertex_starts`: its friction along the mode's direction from rest).
 """
 
 import itertools
@@ -52,7 +56,8 @@ class Mode(eqx.Module):
     - `kind`: FLIGHT, POINT, PAIR or FACE (int).
     - `a`, `b`: contact point indices (POINT uses `a`; PAIR both).
     - `face`: face index (FACE).
-    - `stick`: (2,) bool, whether point a / point b sticks (a face uses entry 0).
+    - `stick`: (2,) bool, whether point a / point b sticks (a face uses entry 0; a face on
+      a support, entry 1 for its vertex `b`: a pivot).
     - `slide_dir`: (2, 3) world unit directions of the slip of points a, b, used while a
       sliding point's slip is zero (sliding from rest); zero means no friction at that instant.
     - `twist_dir`: (3,) the same for a sliding face's slip twist (v . t1, v . t2, rho w . n).
@@ -62,7 +67,9 @@ class Mode(eqx.Module):
     - `side`: +1 or -1, the sign of the surface's `region` margin during the segment (a
       curved surface whose curvature jumps: which part the ball touches).
     - `support`: (3,) int, for a sliding face that rests on three of its vertices with
-      their own friction, those vertices' point indices; -1 for every other mode.
+      their own friction, those vertices' point indices (ascending); -1 for every other
+      mode. One of them may be its point `b`, at rest: sticking (`stick[1]`, a pivot) or
+      starting to slide (`from_rest[1]`, along `slide_dir[1]`).
     """
 
     kind: jax.Array
@@ -91,8 +98,22 @@ def has_supports(model) -> bool:
 
 def on_support(mode: Mode) -> jax.Array:
     """Whether `mode` is a face sliding on three of its vertices, each with its own friction
-    (a support's mode made to stick is the face sticking)."""
+    (a support's mode made to stick is the face sticking), one of them possibly at rest
+    (`on_pivot`, `support_vertex_starts`)."""
     return (mode.kind == FACE) & (mode.support[0] >= 0) & ~mode.stick[0]
+
+
+def on_pivot(mode: Mode) -> jax.Array:
+    """Whether `mode` is a face on a support one of whose vertices, its point `b` (the
+    pivot), sticks while the other two slide, each with its own friction: a face turning
+    about a vertex."""
+    return on_support(mode) & mode.stick[1]
+
+
+def support_vertex_starts(mode: Mode) -> jax.Array:
+    """Whether `mode` is a face on a support one of whose vertices, its point `b`, starts
+    to slide from rest (along `slide_dir[1]`) while the other two slide on."""
+    return on_support(mode) & ~mode.stick[1] & mode.from_rest[1]
 
 
 def flight_mode(dtype) -> Mode:
@@ -117,7 +138,10 @@ class CandidateTable:
     before slide), as static numpy arrays (C,): kind, a, b, face, stick (C, 2), support
     (C, 3), and the masks (C, P) of the points each one holds on the floor (`active`) and
     holds still (`sticking`). A face slides first with its limit surface, then on each
-    set of three of its vertices (`Mode.support`) in the order of their indices.
+    set of three of its vertices (`Mode.support`, in the order of their indices) turning
+    about one of them (`on_pivot`; the pivot is the mode's `b`), then on each such set.
+    (A support one of whose vertices starts to slide from rest is the support's row, that
+    vertex made its `b` at the event: `_select.py`.)
 
     `candidates`: the indices of the modes that can apply when the body rests on the floor
     with some of its points. All touching points of a convex body lie in one supporting
@@ -136,6 +160,9 @@ class CandidateTable:
             for stick in (True, False):
                 held = pts if stick else ()
                 rows.append((FACE, pts[0], pts[0], f, stick, False, pts, held, none))
+            for support in face_supports(pts):
+                for p in support:
+                    rows.append((FACE, pts[0], p, f, False, True, pts, (p,), support))
             for support in face_supports(pts):
                 rows.append((FACE, pts[0], pts[0], f, False, False, pts, (), support))
         smooth = model.smooth_points  # these slide only
@@ -398,15 +425,13 @@ class Rows(eqx.Module):
     support_map: jax.Array
 
 
-def support_friction(geom, mode, rc, mu):
-    """A support's (`Mode.support`) vertices' friction, per multiplier of the face's rows 0-2
-    (normal at the centre, tilts about t1 and t2): the vertices' normal forces f (3,) with
-    sum f = lam_0 and sum f_i (q_i x n) = lam_1 t1 + lam_2 t2 (q_i the vertex's offset from
-    the face's centre `rc`, world), f = G^-1 lam; each vertex's friction -mu_i f_i s_i
-    opposes its own unit slip s_i. Returns (G^-1 (3, 3), the friction force (3, 3) and its
-    couple about the face's centre (3, 3) per unit of each multiplier, world). With three
-    vertices that are not on one line G is invertible; for any other mode G is the
-    identity and the map is returned as zero."""
+def support_loads(geom, mode, rc):
+    """A support's (`Mode.support`) vertices (3,) (point indices; 0 off a support), their
+    offsets q (3, 3) from the face's centre `rc` (world), and the map G^-1 (3, 3) from the
+    multipliers of the face's rows 0-2 (normal at the centre, tilts about t1 and t2) to the
+    vertices' normal forces: sum f = lam_0 and sum f_i (q_i x n) = lam_1 t1 + lam_2 t2, so
+    f = G^-1 lam. With three vertices that are not on one line G is invertible; off a
+    support the map is zero."""
     n, t1, t2 = geom.frame_of(0)  # a face meets a plane: one frame
     used = on_support(mode)
     vertices = jnp.where(used, mode.support, 0)
@@ -414,7 +439,22 @@ def support_friction(geom, mode, rc, mu):
     arms = cross(q, n)  # (3, 3): per vertex
     G = jnp.stack([jnp.ones(3, q.dtype), arms @ t1, arms @ t2])
     G_inv = jnp.where(used, inverse3(jnp.where(used, G, jnp.eye(3, dtype=q.dtype))), 0.0)
-    friction = -mu[vertices, None] * unit_or(geom.slip[vertices], jnp.zeros_like(q))  # (3, 3)
+    return vertices, q, G_inv
+
+
+def support_friction(geom, mode, rc, mu, hat_b):
+    """A support's (`Mode.support`) vertices' friction, per multiplier of the face's rows 0-2
+    (`support_loads`): each vertex's friction -mu_i f_i s_i opposes its own unit slip s_i;
+    a vertex starting to slide from rest (`support_vertex_starts`), the direction `hat_b`;
+    a pivot's (`on_pivot`) is its own rows'. Returns (G^-1 (3, 3), the friction force
+    (3, 3) and its couple about the face's centre (3, 3) per unit of each multiplier,
+    world)."""
+    vertices, q, G_inv = support_loads(geom, mode, rc)
+    own = vertices == mode.b
+    slides = ~(own & on_pivot(mode))
+    starts = own & support_vertex_starts(mode)
+    directions = jnp.where(starts[:, None], hat_b, unit_or(geom.slip[vertices], jnp.zeros_like(q)))
+    friction = -jnp.where(slides, mu[vertices], 0.0)[:, None] * directions  # (3, 3)
     force = G_inv.T @ friction  # row k: sum_i G_inv[i, k] F_i
     couple = G_inv.T @ cross(q, friction)
     return G_inv, force, couple
@@ -432,12 +472,16 @@ def face_twist(state, geom, model, face):
     return jnp.stack([dot(vc, t1), dot(vc, t2), rho * dot(geom.w, n)]), rho
 
 
-def _with_face_rows(state, geom, mode, hat_f, mu, scene, model, point_rows, supports=True):
+def _with_face_rows(state, geom, mode, hats, mu, scene, model, point_rows, supports=True):
     """The rows of a face mode (normal at the face's centre, tilts about t1 and t2,
-    tangential at the centre, spin), or `point_rows` for the other kinds; `mu` (P,).
+    tangential at the centre, spin; a face turning about a vertex, `on_pivot`: tangential
+    at the vertex, no spin row), or `point_rows` for the other kinds; `hats`: the sliding
+    directions at point b (a support's vertex starting from rest) and of the face's twist;
+    `mu` (P,).
     `supports`: whether a support's vertices' friction enters the force columns (static;
     the projections use only the rows)."""
     p_d, p_r, p_rdot, p_dC, p_mask, p_pos = point_rows
+    hat_b, hat_f = hats
     dtype = state.pos.dtype
     (n, t1, t2), R, w = geom.frame_of(0), geom.R, geom.w  # a face meets a plane: one frame
     is_face, stick = mode.kind == FACE, mode.stick[0]
@@ -456,7 +500,7 @@ def _with_face_rows(state, geom, mode, hat_f, mu, scene, model, point_rows, supp
         support = on_support(mode)
         support_map, v_force, v_couple = only_where_needed(
             support,
-            lambda: support_friction(geom, mode, rc, mu),
+            lambda: support_friction(geom, mode, rc, mu, hat_b),
             lambda: (jnp.zeros((3, 3), dtype),) * 3,
         )
     else:
@@ -467,7 +511,12 @@ def _with_face_rows(state, geom, mode, hat_f, mu, scene, model, point_rows, supp
     f_kC = jnp.concatenate([jnp.where(stick, zero3, slide_couple)[None], f_k[1:]])
     f_dC = f_dC.at[:3].set(jnp.where(support, f_d[:3] + v_force, f_dC[:3]))
     f_kC = f_kC.at[:3].set(jnp.where(support, f_k[:3] + v_couple, f_kC[:3]))
-    f_mask = jnp.stack([is_face] * 3 + [is_face & stick] * 3)
+    # a face turning about a vertex: the tangential rows (slots 3, 4) at that vertex
+    pivot = on_pivot(mode)
+    r_pivot = jnp.where(pivot, geom.r[mode.b], rc)
+    f_r = jnp.stack([rc, rc, rc, r_pivot, r_pivot, rc])
+    f_rdot = cross(w, f_r)  # the face's centre and its corners are body points
+    f_mask = jnp.stack([is_face] * 3 + [is_face & (stick | pivot)] * 2 + [is_face & stick])
     mask = jnp.where(is_face, f_mask, p_mask)
     holonomic = mask & jnp.where(
         is_face,
@@ -476,8 +525,8 @@ def _with_face_rows(state, geom, mode, hat_f, mu, scene, model, point_rows, supp
     )
     return (
         jnp.where(is_face, f_d, p_d),
-        jnp.where(is_face, rc, p_r),
-        jnp.where(is_face, cross(w, rc), p_rdot),  # a face's centre is a body point
+        jnp.where(is_face, f_r, p_r),
+        jnp.where(is_face, f_rdot, p_rdot),
         jnp.where(is_face, f_k, 0.0),
         jnp.where(is_face, f_dC, p_dC),
         jnp.where(is_face, f_kC, 0.0),
@@ -571,7 +620,7 @@ def mode_rows(
             state,
             geom,
             mode,
-            hat_f,
+            (hat_b, hat_f),
             mu,
             scene,
             model,
@@ -758,12 +807,13 @@ class SlidingSolver(eqx.Module):
     the searches of a direction in which a contact at rest starts to slide
     (`_select.py`), which try many directions at one state.
 
-    Only the force columns of slots 0 and 1 depend on the directions (a sliding point's
-    normal column n - mu s_hat, a sliding face's force and couple), and affinely, so the
-    matrix of the rows is A(s) = A0 + u0(s) e0^T + u1(s) e1^T with A0 the matrix at zero
-    directions. With A0^-1 applied once to the right-hand side and to the columns' rates,
-    each direction costs a 2 x 2 solve (Sherman-Morrison-Woodbury) instead of a 6 x 6 one:
-    the same solution, up to roundoff, as `solve_mode` with those `hats`.
+    Only the force columns of slots 0-2 depend on the directions (a sliding point's
+    normal column n - mu s_hat, a sliding face's force and couple: slots 0 and 1; a
+    support's vertex starting from rest: 0-2), and affinely, so the matrix of the rows is
+    A(s) = A0 + sum_k u_k(s) e_k^T (k = 0, 1, 2) with A0 the matrix at zero directions.
+    With A0^-1 applied once to the right-hand side and to the columns' rates, each
+    direction costs a 3 x 3 solve (Sherman-Morrison-Woodbury) instead of a 6 x 6 one: the
+    same solution, up to roundoff, as `solve_mode` with those `hats`.
     """
 
     rows: Rows  # at zero directions
@@ -771,20 +821,16 @@ class SlidingSolver(eqx.Module):
     minv_columns: jax.Array  # (6, 6): M^-1 C at zero directions
     d_minv_columns: jax.Array  # (3, 3, 6, 6)
     lam0: jax.Array  # (6,): A0^-1 rhs
-    d_lam: jax.Array  # (3, 3, 6, 2): A0^-1 (the rate of columns 0 and 1 of A)
+    d_lam: jax.Array  # (3, 3, 6, 3): A0^-1 (the rate of columns 0-2 of A)
     u0_dot: jax.Array  # (6,): (a, alpha) from the forces alone
     geom: Geometry
 
     def __call__(self, hats) -> Solution:
         H = jnp.stack(hats)  # (3, 3): the directions at a, at b, of the face's twist
-        Y = jnp.einsum("jc,jcik->ik", H, self.d_lam)  # A0^-1 [u0(s), u1(s)]
-        # (A0 + U V^T)^-1 rhs = x0 - Y (1 + V^T Y)^-1 V^T x0, with V = [e0, e1]
-        S = jnp.eye(2, dtype=Y.dtype) + Y[:2]
-        det = S[0, 0] * S[1, 1] - S[0, 1] * S[1, 0]
-        det = jnp.where(det == 0, jnp.finfo(Y.dtype).tiny, det)
-        x = self.lam0[:2]
-        coeff = jnp.stack([S[1, 1] * x[0] - S[0, 1] * x[1], S[0, 0] * x[1] - S[1, 0] * x[0]])
-        lam = jnp.where(self.rows.mask, self.lam0 - Y @ (coeff / det), 0.0)
+        Y = jnp.einsum("jc,jcik->ik", H, self.d_lam)  # A0^-1 [u0(s), u1(s), u2(s)]
+        # (A0 + U V^T)^-1 rhs = x0 - Y (1 + V^T Y)^-1 V^T x0, with V = [e0, e1, e2]
+        S = jnp.eye(3, dtype=Y.dtype) + Y[:3]
+        lam = jnp.where(self.rows.mask, self.lam0 - Y @ (inverse3(S) @ self.lam0[:3]), 0.0)
         minv_C = self.minv_columns + jnp.einsum("jc,jcrk->rk", H, self.d_minv_columns)
         u_dot = self.u0_dot + lam @ minv_C
         rows = eqx.tree_at(
@@ -796,14 +842,16 @@ class SlidingSolver(eqx.Module):
         return Solution(acc, alpha, self.geom.R.T @ alpha, lam, rows, self.geom, hats)
 
 
-def column_rates(geom: Geometry, mode: Mode, mu, model) -> jax.Array:
+def column_rates(geom: Geometry, mode: Mode, mu, model, support_map) -> jax.Array:
     """dC / d(hat j, component c) (3, 3, 6, 6) of `mode_rows`' force columns, j over the
     sliding directions (at a, at b, the face's twist): the columns are affine in them, and
     only slot 0 (a sliding point a, or a sliding face) and slot 1 (a sliding point b) move,
     with the friction force -mu s_hat at the point (a face: -mu (s_1 t1 + s_2 t2) at its
     centre, and the couple -mu rho s_3 n; a support's vertices' friction follows their own
-    slips, not these directions). Written out beside `mode_rows`' columns (the
-    derivative of `mode_rows` traced a second copy of it into every contact program);
+    slips, not these directions, but for a vertex b starting from rest, whose friction
+    -mu f_b s_b moves slots 0-2 by its load's share of each, (G^-1)_bk: the rows'
+    `support_map`). Written out beside `mode_rows`' columns (the derivative of `mode_rows`
+    traced a second copy of it into every contact program);
     `test_sliding_solver_equals_the_direct_solve` holds the two equal."""
     dtype = geom.R.dtype
     mu = jnp.broadcast_to(mu, (model.num_points,))
@@ -825,7 +873,14 @@ def column_rates(geom: Geometry, mode: Mode, mu, model) -> jax.Array:
         zero3 = jnp.zeros(3, dtype)
         force = slide_f * jnp.stack([t1, t2, zero3])
         couple = slide_f * jnp.stack([zero3, zero3, rhos[mode.face] * n])
-        d = d.at[2, :, 0].set(column(geom.R @ centres[mode.face], force, couple))
+        rc = geom.R @ centres[mode.face]
+        d = d.at[2, :, 0].set(column(rc, force, couple))
+        if has_supports(model):  # a support's vertex b starting from rest: along hat b
+            vertices = jnp.where(on_support(mode), mode.support, 0)
+            own = (vertices == mode.b).astype(dtype)
+            share = jnp.where(support_vertex_starts(mode), own @ support_map, 0.0)
+            friction = column(geom.r[mode.b], -mu[mode.b] * eye)  # (3, 6): per component
+            d = d.at[1, :, :3].add(share[None, :, None] * friction[:, None, :])
     return d
 
 
@@ -836,11 +891,13 @@ def sliding_solver(t, state: State, mode: Mode, scene, model, tol, geom) -> Slid
 
 
 def held_and_sliding(t, state: State, mode: Mode, scene, model, tol, geom):
-    """(the solution of `mode` made to stick at both of its points, or its face, with no
-    sliding direction; the `SlidingSolver` of `mode`) at `state` (unit quaternion), `geom`
-    its geometry: both built side by side (`sliding_solvers`), so that the compiled program
+    """(the solution of `mode` made to stick at both of its points, or its face (a
+    support whose vertex b starts from rest: at that vertex, a pivot), with no sliding
+    direction; the `SlidingSolver` of `mode`) at `state` (unit quaternion), `geom` its
+    geometry: both built side by side (`sliding_solvers`), so that the compiled program
     holds the rows and their solve once for the two."""
-    held = eqx.tree_at(lambda m: m.stick, mode, jnp.ones(2, bool))
+    stick = jnp.stack([~support_vertex_starts(mode), jnp.array(True)])
+    held = eqx.tree_at(lambda m: (m.stick, m.from_rest), mode, (stick, jnp.zeros(2, bool)))
     both = jax.tree.map(lambda x, y: jnp.stack([x, y]), held, mode)
     solvers = sliding_solvers(t, state, both, scene, model, tol, geom)
     zero = jnp.zeros(3, state.pos.dtype)
@@ -861,20 +918,20 @@ def sliding_solvers(t, state: State, modes: Mode, scene, model, tol, geom) -> Sl
     def build(mode):
         zero = jnp.zeros((3, 3), dtype)
         rows = mode_rows(state, geom, mode, (zero[0], zero[1], zero[2]), mu, scene, model, blend)
-        d_columns = column_rates(geom, mode, mu, model)
+        d_columns = column_rates(geom, mode, mu, model, rows.support_map)
         minv = lambda C: inverse_mass_columns(body, geom.R, C)  # noqa: E731 (linear in C)
         minv_C = minv(rows.C)
         d_minv = jax.vmap(jax.vmap(minv))(d_columns)
         both = rows.mask[:, None] & rows.mask[None, :]
         A0 = jnp.where(both, rows.J @ minv_C.T, jnp.eye(NUM_ROWS, dtype=dtype))
-        # the rates of A's columns 0 and 1 (the only ones the directions move)
-        d_A = jnp.einsum("ix,jckx->jcik", rows.J, d_minv[:, :, :2])  # (3, 3, 6, 2)
-        d_A = jnp.where(both[None, None, :, :2], d_A, 0.0)
+        # the rates of A's columns 0-2 (the only ones the directions move)
+        d_A = jnp.einsum("ix,jckx->jcik", rows.J, d_minv[:, :, :3])  # (3, 3, 6, 3)
+        d_A = jnp.where(both[None, None, :, :3], d_A, 0.0)
         stab = jnp.where(rows.holonomic, 2 * beta * rows.vel + beta**2 * rows.pos, beta * rows.vel)
         rhs = jnp.where(rows.mask, -(rows.J @ u0_dot + rows.bias + stab), 0.0)
-        right = jnp.concatenate([rhs[:, None], jnp.moveaxis(d_A, 2, 0).reshape(NUM_ROWS, 18)], 1)
-        X = small_solve(A0, right)  # (6, 19)
-        d_lam = jnp.moveaxis(X[:, 1:].reshape(NUM_ROWS, 3, 3, 2), 0, 2)
+        right = jnp.concatenate([rhs[:, None], jnp.moveaxis(d_A, 2, 0).reshape(NUM_ROWS, 27)], 1)
+        X = small_solve(A0, right)  # (6, 28)
+        d_lam = jnp.moveaxis(X[:, 1:].reshape(NUM_ROWS, 3, 3, 3), 0, 2)
         return SlidingSolver(rows, d_columns, minv_C, d_minv, X[:, 0], d_lam, u0_dot, geom)
 
     return jax.vmap(build)(modes)

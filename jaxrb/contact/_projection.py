@@ -81,7 +81,8 @@ def _still_rows(state, geom, mode, model, slip_stop):
     kind = mode.kind
     still_a = _safe_norm(geom.slip[mode.a]) <= slip_stop
     still_b = _safe_norm(geom.slip[mode.b]) <= slip_stop
-    # (a support's vertices slide: its mode is chosen only when every one of them slips)
+    # (a support's vertices slide: its mode is chosen only when every one of them slips but
+    # its vertex b, whose rows are the mode's own where it pivots)
     still_f = _safe_norm(face_twist(state, geom, model, mode.face)[0]) <= slip_stop
     still_f = still_f & ~on_support(mode)
     point_like = (kind == POINT) | (kind == PAIR)

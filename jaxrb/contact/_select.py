@@ -25,6 +25,7 @@ from ._modes import (
     face_twist,
     held_and_sliding,
     inverse_mass_columns,
+    on_pivot,
     on_support,
     only_where_needed,
     point_coefficients,
@@ -196,15 +197,28 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
     zero3 = jnp.zeros(3, dtype)
     beta = jnp.asarray(tol.stabilisation, dtype)
     twist, _ = face_twist(state, geom, model, mode.face)
+    # a support one of whose vertices is at rest (and does not pivot): that vertex, made
+    # the mode's point b, starts to slide from rest (`support_vertex_starts`)
+    support = on_support(mode)
+    vertices = jnp.where(support, mode.support, 0)
+    still_vertices = zero_slip[vertices]
+    starts = support & ~on_pivot(mode) & (jnp.sum(still_vertices) == 1)
+    mode = eqx.tree_at(
+        lambda m: (m.b, m.from_rest),
+        mode,
+        (
+            jnp.where(starts, vertices[jnp.argmax(still_vertices)], mode.b),
+            mode.from_rest.at[1].set(starts | mode.from_rest[1]),
+        ),
+    )
     slides_a = ((mode.kind == POINT) | (mode.kind == PAIR)) & ~mode.stick[0]
     rest_a = slides_a & zero_slip[mode.a]
-    rest_b = (mode.kind == PAIR) & ~mode.stick[1] & zero_slip[mode.b]
-    support = on_support(mode)
+    rest_b = ((mode.kind == PAIR) & ~mode.stick[1] & zero_slip[mode.b]) | starts
     rest_f = (mode.kind == FACE) & ~mode.stick[0] & ~support
     rest_f = rest_f & (jnp.linalg.norm(twist) <= tol.slip_stop)
 
     # the mode made to stick, and its solution for any sliding directions (at the cost of a
-    # 2 x 2 solve each), built side by side. Sliding from rest starts opposite to the
+    # 3 x 3 solve each), built side by side. Sliding from rest starts opposite to the
     # friction that sticking would need (exactly so at the cone's boundary, where the slip's
     # acceleration vanishes)
     held, solve = held_and_sliding(t, state, mode, scene, model, tol, geom)
@@ -213,7 +227,8 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
     relative = lambda sol: sol.point_accelerations() + offsets  # noqa: E731
     lam, d = held.lam, held.rows.J[:, :3]
     need_a = lam[2] * d[2] + lam[3] * d[3]
-    need_b = lam[4] * d[4] + lam[5] * d[5]
+    # (a support's vertex starting from rest: the friction of that vertex as a pivot)
+    need_b = jnp.where(starts, lam[3] * d[3] + lam[4] * d[4], lam[4] * d[4] + lam[5] * d[5])
     need_f = jnp.stack([lam[3], lam[4], lam[5] / held.rows.rho])
     # a single point: its sliding direction in closed form (the others: fixed point below)
     rows = held.rows
@@ -241,7 +256,7 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
     hats0 = seeds(need_a)
     point = (mode.kind == POINT) & rest_a
     pair = mode.kind == PAIR
-    scan_b = pair & rest_b & ~rest_a
+    scan_b = (pair & rest_b & ~rest_a) | starts
     point_measure = point_slip_measure(bp, frame.T @ Kp @ frame, mu[mode.a], frame[0])
 
     def measure(s):
@@ -250,11 +265,15 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
         hats = (jnp.where(scan_b, hats0[0], s), jnp.where(scan_b, s, hats0[1]), hats0[2])
         sol = solve(hats)
         acc = geom.tangential(relative(sol))[jnp.where(scan_b, mode.b, mode.a)]
-        end = (acc, (sol.lam[0] >= 0) & (sol.lam[1] >= 0))
-        return tree_where(point, point_measure(s), end)
+        pushes = jnp.where(
+            starts,
+            jnp.all(sol.rows.support_map @ sol.lam[:3] >= 0),  # a support's vertex forces
+            (sol.lam[0] >= 0) & (sol.lam[1] >= 0),
+        )
+        return tree_where(point, point_measure(s), (acc, pushes))
 
     scan_dir, found = only_where_needed(
-        live & (point | (pair & (rest_a != rest_b))),
+        live & (point | (pair & (rest_a != rest_b)) | starts),
         lambda: scan_direction(
             measure, *geom.frame_of(jnp.where(scan_b, mode.b, mode.a)), dtype, tol.force
         ),
@@ -270,6 +289,9 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
         hats0, exact_a, exact_b, exact_pair = _pair_directions(
             geom, mode, hats0, rest_a, rest_b, (scan_dir, found), live, solve, relative, dtype
         )
+    exact_start = starts & found  # a support's vertex starting from rest: scanned as well
+    hats0 = (hats0[0], jnp.where(exact_start, scan_dir, hats0[1]), hats0[2])
+    exact_b = exact_b | exact_start
     small = 1e-6 * (1.0 + _safe_norm(held.acc))  # slip accelerations below this: keep the seed
 
     def slip_rates(sol):  # relative to the stabilisation's targets, as every condition
@@ -336,7 +358,9 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
         ~mode.stick[0] | (jnp.linalg.norm(twist) <= tol.slip_stop),
         ~(mode.stick[0] & ~zero_slip[mode.a]) & ~(mode.stick[1] & ~zero_slip[mode.b]),
     )
-    still = still & ~(support & jnp.any(zero_slip[jnp.where(support, mode.support, 0)]))
+    # (but its vertex b, at rest where it pivots or starts to slide from rest)
+    at_rest = (on_pivot(mode) | starts) & (vertices == mode.b)
+    still = still & ~(support & jnp.any(still_vertices != at_rest))
     # the Painlevé paradox: a contact that slides (not from rest) on a normal problem that
     # is not a P-matrix, while every resting point the mode does not hold stays clear of the
     # floor (where one would not, the mode is not the body's contact whatever its own normal
