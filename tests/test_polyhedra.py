@@ -214,7 +214,7 @@ def test_candidate_lists_hold_every_mode_that_can_apply():
 
 
 THROWS = 3
-PIVOTING = (1, 8, 12)  # of the 48 turning states below: see its test
+VERTEX_AT_REST = (1, 8, 41)  # of the 48 turning states below: see its test
 
 
 @persistent
@@ -275,25 +275,29 @@ def test_thrown_d12_settles_on_a_face(getkey):
 
 
 def test_d12_turning_flat_with_high_friction_comes_to_rest():
-    """Three d12s lying flat on a face and turning (1-6 rad/s) with friction 0.75-0.95: the
-    face tips onto an edge and hops, and comes down slipping slowly about a vertex at rest,
-    a state no mode of the engine fits (a face pivoting about a vertex is not modelled). A
-    pair of that face then has a normal problem that is not a P-matrix, but the face's
-    other vertices would sink in that mode: not the Painlevé paradox, and each die comes to
-    rest on a face (they are 3 of 48 such states, the only ones that stopped with
-    `RESULTS.painleve_paradox` before the paradox required the resting points a mode does
-    not hold to stay clear of the floor)."""
+    """Three d12s lying flat on a face and turning (1-6 rad/s) with friction 0.92-0.94: the
+    face slides on three of its vertices, tips onto an edge and hops, and comes down with a
+    vertex of its support at rest, which then starts to slide from rest (docs/contact.md,
+    section 2). Before a support's vertex at rest was modelled no mode fitted there: 1, 1
+    and 19 events (member 41 chattered 16 times in 2.2 us) took the least inconsistent
+    one. Now every event's mode is consistent, and each die comes to rest on a face. A
+    fourth state (member 12) meets an impact whose law finds no consistent pattern: marked
+    in the event log, at an impact."""
     die = dice.d12()
     states = flat_turning_states(contact_model(die.shape), jax.random.key(5), 48)
     friction = jax.random.uniform(jax.random.key(6), (48,), minval=0.75, maxval=0.95)
-    which = np.array(PIVOTING)
+    which = np.array([*VERTEX_AT_REST, 12])
     batch = _throw_d12(jax.tree.map(lambda x: x[which], states), friction[which])
     log = batch.contact
-    assert np.all(np.asarray(log.inconsistent) >= 1)  # the pivoting states
-    # each such event is marked in the event log, at an event's time
+    inconsistent = np.asarray(log.inconsistent)
+    np.testing.assert_array_equal(inconsistent[:3], 0)
+    # each event without a consistent mode is marked in the event log, at an impact
     marked = np.asarray(log.event_inconsistent)
-    np.testing.assert_array_equal(marked.sum(axis=1), np.asarray(log.inconsistent))
+    np.testing.assert_array_equal(marked.sum(axis=1), inconsistent)
+    assert inconsistent[3] >= 1
     assert np.all(np.isfinite(np.asarray(log.event_time)[marked]))
+    causes = [jaxrb.contact.CAUSES[c] for c in np.asarray(log.event_cause)[marked]]
+    assert set(causes) <= {"touch", "flat"}, causes
     _assert_at_rest_on_a_face(die, batch, 0.005)
 
 
