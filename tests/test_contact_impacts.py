@@ -338,3 +338,60 @@ def test_frictionless_e1_single_point_conserves_energy(getkey):
             0.5 * body.mass * s.vel @ s.vel + 0.5 * s.omega @ (body.inertia_matrix @ s.omega)
         )  # noqa: E731
         assert float(kin(after)) == pytest.approx(float(kin(state)), rel=1e-12)
+
+
+# a d12 of the turning states (tests/turning_states.py: key 5, member 12, friction
+# 0.91583886...) as its face came down flat while it slid on its vertices 1 and 17: position,
+# unit quaternion, velocity (world), angular velocity (body)
+FACE_LANDS_SLIDING = (
+    (0.0001630122983288604, 0.00010244084838257752, 0.010021647279257247),
+    (-0.342893992643257, 0.3457759617222796, 0.6167973607763716, 0.6184041638309864),
+    (0.00048794718614006535, 6.227805842669835e-05, -8.273392712456398e-06),
+    (0.05260066924786037, 0.03400243934261265, -0.0004127760833329344),
+)
+
+
+def test_a_face_landing_flat_while_it_slides_fast_has_a_consistent_impulse():
+    """A d12's pentagon comes down flat, its vertices 0, 12 and 16 approaching at 1.1e-5 to
+    1.8e-5 m/s while they slide at 6e-4 to 9e-4 m/s (friction 0.916). Projected Gauss-Seidel
+    did not converge in its 1000 sweeps (sliding friction makes the problem unsymmetric)
+    and no polish of its pattern fitted: the impact was counted without a consistent
+    impulse. The patterns of one to three slots pushing and sliding, tried where no polish
+    fits, give one. Checked from the states before and after at the face's five vertices:
+    none approaches after, each that approached leaves at no more than e times its speed
+    and at least one at exactly e times (Newton), the total impulse lies in the friction
+    cone, and the kinetic energy falls."""
+    shape = jaxrb.dice.d12().shape
+    body = jaxrb.RigidBody(0.005, shape=shape)
+    mu, e = 0.9158388631109576, 0.5
+    scene = jaxrb.Scene(body, forces=(jaxrb.Gravity(),), floor=jaxrb.Floor(e, mu))
+    model = contact_model(shape)
+    state = jaxrb.State(*map(jnp.asarray, FACE_LANDS_SLIDING))
+    state = jaxrb.State(state.pos, jaxrb.quat_normalize(state.quat), state.vel, state.omega)
+    geom = geometry(state, scene, model, jnp.zeros(3))
+    touching = geom.gap <= _LAW_TOL.contact
+    face = np.flatnonzero(np.asarray(touching)).tolist()
+    assert face == [0, 1, 12, 16, 17]
+    out = jaxrb.contact.solve_impacts(state, geom, geom.r, touching, scene, _LAW_TOL)
+    assert bool(out.consistent[NEWTON])
+    after = jax.tree.map(lambda x: np.asarray(x[NEWTON]), out.state)
+
+    def normal_speeds(s):
+        R = np.asarray(jaxrb.quat_to_matrix(jnp.asarray(s.quat)))
+        r = np.asarray(shape.vertices)[face] @ R.T
+        return (np.asarray(s.vel) + np.cross(R @ np.asarray(s.omega), r))[:, 2]
+
+    before, leaving = normal_speeds(jax.tree.map(np.asarray, state)), normal_speeds(after)
+    assert np.all(before[[0, 2, 3]] < -1e-5)  # vertices 0, 12, 16 approach
+    target = -e * np.minimum(before, 0.0)
+    scale = np.max(np.abs(before))
+    assert np.all(leaving >= target - 1e-9 * scale), leaving - target
+    assert np.min(np.abs(leaving - target)) <= 1e-9 * scale
+    impulse = np.asarray(out.impulse[NEWTON])
+    assert impulse[2] > 0
+    assert np.linalg.norm(impulse[:2]) <= mu * impulse[2] * (1 + 1e-9)
+
+    def kinetic(s):
+        return 0.5 * body.mass * s.vel @ s.vel + 0.5 * s.omega @ (body.inertia_matrix @ s.omega)
+
+    assert float(kinetic(after)) < float(kinetic(state))

@@ -214,7 +214,7 @@ def test_candidate_lists_hold_every_mode_that_can_apply():
 
 
 THROWS = 3
-VERTEX_AT_REST = (1, 8, 41)  # of the 48 turning states below: see its test
+VERTEX_AT_REST = (1, 8, 12, 41)  # of the 48 turning states below: see its test
 
 
 @persistent
@@ -275,29 +275,22 @@ def test_thrown_d12_settles_on_a_face(getkey):
 
 
 def test_d12_turning_flat_with_high_friction_comes_to_rest():
-    """Three d12s lying flat on a face and turning (1-6 rad/s) with friction 0.92-0.94: the
+    """Four d12s lying flat on a face and turning (1-6 rad/s) with friction 0.92-0.94: the
     face slides on three of its vertices, tips onto an edge and hops, and comes down with a
     vertex of its support at rest, which then starts to slide from rest (docs/contact.md,
-    section 2). Before a support's vertex at rest was modelled no mode fitted there: 1, 1
-    and 19 events (member 41 chattered 16 times in 2.2 us) took the least inconsistent
-    one. Now every event's mode is consistent, and each die comes to rest on a face. A
-    fourth state (member 12) meets an impact whose law finds no consistent pattern: marked
-    in the event log, at an impact."""
+    section 2), or lands flat while it slides 50 times faster than it approaches, where the
+    impact law's Gauss-Seidel sweeps need not converge and patterns of its slots pushing
+    are tried (section 5). Before both no mode or impulse fitted there: 1, 1, 19 and 3
+    events took the least inconsistent one (member 41 chattered 16 times in 2.2 us). Now
+    every event is consistent, and each die comes to rest on a face."""
     die = dice.d12()
     states = flat_turning_states(contact_model(die.shape), jax.random.key(5), 48)
     friction = jax.random.uniform(jax.random.key(6), (48,), minval=0.75, maxval=0.95)
-    which = np.array([*VERTEX_AT_REST, 12])
+    which = np.array(VERTEX_AT_REST)
     batch = _throw_d12(jax.tree.map(lambda x: x[which], states), friction[which])
     log = batch.contact
-    inconsistent = np.asarray(log.inconsistent)
-    np.testing.assert_array_equal(inconsistent[:3], 0)
-    # each event without a consistent mode is marked in the event log, at an impact
-    marked = np.asarray(log.event_inconsistent)
-    np.testing.assert_array_equal(marked.sum(axis=1), inconsistent)
-    assert inconsistent[3] >= 1
-    assert np.all(np.isfinite(np.asarray(log.event_time)[marked]))
-    causes = [jaxrb.contact.CAUSES[c] for c in np.asarray(log.event_cause)[marked]]
-    assert set(causes) <= {"touch", "flat"}, causes
+    np.testing.assert_array_equal(np.asarray(log.inconsistent), 0)
+    assert not np.any(np.asarray(log.event_inconsistent))
     _assert_at_rest_on_a_face(die, batch, 0.005)
 
 
