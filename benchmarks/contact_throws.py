@@ -35,6 +35,9 @@ spherical bowl of radius 0.3 m, or onto a cone of inclination 0.3 rad (apex roun
 5 cm), both with rolling
 resistance 0.01 (the "floor" of the checks is then that surface); `ball_on_wheel` onto that
 cone bounded by a smooth wall of radius 0.1 m (a small roulette wheel: track and wall).
+`--shapes bar` throws a narrow box (24 x 8 x 8 mm, 5 g) onto floors of friction U(0.3, 1.5),
+where a body on an edge or corner can meet the Painlevé paradox (its result code then says
+so, and the run stops there).
 
 Writes `contact_throws.md` (the table and the counts), `contact_throws.png` (energy above
 the floor over time, the lowest point's height, the final state) and per shape
@@ -106,6 +109,11 @@ SHAPES["ball_on_wheel"] = (*BALL, 0.02 / np.cos(0.3), 4.0)
 PLURAL.update(
     ball_in_bowl="balls in a bowl", ball_on_cone="balls on a cone", ball_on_wheel="balls on a wheel"
 )
+# a narrow box (24 x 8 x 8 mm, 5 g) thrown onto floors of friction U(0.3, 1.5) instead of
+# U(0.2, 0.8): high enough for the Painlevé paradox (docs/contact.md, section 3)
+SHAPES["bar"] = (0.005, lambda: jaxrb.Box(jnp.array([0.012, 0.004, 0.004])), 0.004, 4.0)
+PLURAL["bar"] = "bars"
+FRICTION = {"bar": (0.3, 1.5)}  # the range friction U(0.2, 0.8) is mapped onto
 FLOORS = {
     "ball_in_bowl": lambda e, mu: jaxrb.Bowl(e, mu, radius=0.3, rolling_resistance=0.01),
     "ball_on_cone": lambda e, mu: jaxrb.Cone(
@@ -116,7 +124,7 @@ FLOORS = {
     ),
 }
 DEFAULT_SHAPES = "die,coin"
-KINDS = ("die", "coin", *DICE, "ball_in_bowl", "ball_on_cone", "ball_on_wheel")
+KINDS = ("die", "coin", *DICE, "ball_in_bowl", "ball_on_cone", "ball_on_wheel", "bar")
 
 
 @functools.cache
@@ -176,6 +184,9 @@ def run(kind, n, seed, chunk, rtol, max_impacts, members=None):
         return tr, lowest, jaxrb.energy(scene, tr.states)
 
     args = throws(n, seed)
+    if kind in FRICTION:
+        lo, hi = FRICTION[kind]
+        args = (*args[:2], lo + (args[2] - 0.2) * (hi - lo) / 0.6)
     if members is not None:
         args = jax.tree.map(lambda x: x[np.asarray(members)], args)
         n = len(members)

@@ -8,7 +8,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from programs import persistent
-from turning_states import first_face_down, flat_turning_states
+from turning_states import (
+    NARROW_BOX,
+    first_face_down,
+    flat_turning_states,
+    narrow_box_on_end,
+    narrow_box_scene,
+)
 
 import jaxrb
 from benchmarks.contact_throws import shape_of, throws
@@ -733,26 +739,28 @@ def test_a_face_whose_far_vertices_rise_slowly_comes_down_flat(throw):
 
 
 def _vertex_at_rest(scene, state, corners, support, b, start=None):
-    """A face of a die on the floor (normal +z) carried by three of its vertices `support`
-    (indices into `corners`, body-frame offsets from the mass centre, m), one of which, `b`,
-    has no slip, solved here in world coordinates independently of the engine: the
-    vertices' normal forces f (3,) (N) hold their normal accelerations at zero, each vertex
-    but b has Coulomb friction -mu f_i along its own unit slip, and vertex b either starts
-    to slide from rest along the unit vector `start` (friction -mu f_b start) or, with
-    `start` None, sticks: its friction force F (N, world) holds its slip's acceleration at
-    the stabilisation's target, a_t = -beta s_b (docs/contact.md, section 3). Returns (f,
-    F, b's slip acceleration relative to that target, a_t + beta s_b (m/s^2, world))."""
+    """A die on the floor (normal +z) held by its vertices `support` (indices into
+    `corners`, body-frame offsets from the mass centre, m: a face's three, an edge's two),
+    one of which, `b`, has no slip, solved here in world coordinates independently of the
+    engine: the vertices' normal forces f (N) hold their normal accelerations at zero, each
+    vertex but b has Coulomb friction -mu f_i along its own unit slip, and vertex b either
+    starts to slide from rest along the unit vector `start` (friction -mu f_b start) or,
+    with `start` None, sticks: its friction force F (N, world) holds its slip's acceleration
+    at the stabilisation's target, a_t = -beta s_b (docs/contact.md, section 3). Returns (f,
+    F, b's slip acceleration relative to that target, a_t + beta s_b (m/s^2, world), every
+    corner's normal acceleration (m/s^2))."""
     body, mu = scene.body, float(scene.floor.friction)
     inertia, w, r, slip = vertex_kinematics(scene, state, corners)
     n = np.array([0.0, 0.0, 1.0])
     sticks = start is None
+    held = len(support)
     directions = {i: slip[i] / np.linalg.norm(slip[i]) for i in support if i != b}
     directions[b] = np.zeros(3) if sticks else np.asarray(start)
 
     def accelerations(x):  # the points' accelerations (P, 3) for unknowns x: f, then F
         forces = [(i, x[k] * (n - mu * directions[i])) for k, i in enumerate(support)]
         if sticks:
-            forces.append((b, np.array([x[3], x[4], 0.0])))
+            forces.append((b, np.array([x[held], x[held + 1], 0.0])))
         a = np.array([0.0, 0.0, -9.81]) + sum(f for _, f in forces) / float(body.mass)
         torque = sum(np.cross(r[i], f) for i, f in forces) - np.cross(w, inertia @ w)
         alpha = np.linalg.solve(inertia, torque)
@@ -763,13 +771,15 @@ def _vertex_at_rest(scene, state, corners, support, b, start=None):
         normal = acc[list(support), 2]
         return np.concatenate([normal, acc[b, :2] + 20.0 * slip[b, :2]]) if sticks else normal
 
-    size = 5 if sticks else 3
+    size = held + 2 if sticks else held
     base = conditions(np.zeros(size))  # the conditions are affine in the unknowns
     A = np.stack([conditions(e) - base for e in np.eye(size)], axis=1)
     x = np.linalg.solve(A, -base)
-    F = np.array([x[3], x[4], 0.0]) if sticks else -mu * x[list(support).index(b)] * start
-    relative = accelerations(x)[b] + TOL.stabilisation * slip[b]
-    return x[:3], F, relative - (relative @ n) * n
+    f = x[:held]
+    F = np.array([x[held], x[held + 1], 0.0]) if sticks else -mu * f[list(support).index(b)] * start
+    acc = accelerations(x)
+    relative = acc[b] + TOL.stabilisation * slip[b]
+    return f, F, relative - (relative @ n) * n, acc[:, 2]
 
 
 def _assert_starts_from_rest(chosen, margins, scene, state, vertex, mass):
@@ -786,7 +796,7 @@ def _assert_starts_from_rest(chosen, margins, scene, state, vertex, mass):
     assert bool(mode.from_rest[1])
     start = np.asarray(mode.slide_dir[1])
     corners = np.asarray(contact_model(scene.body.shape).corners)
-    f, _, slip_acc = _vertex_at_rest(scene, state, corners, support, vertex, start)
+    f, _, slip_acc, _ = _vertex_at_rest(scene, state, corners, support, vertex, start)
     along = slip_acc @ start
     across = np.cross(start, slip_acc)[2]
     assert along > 0 and abs(across) <= 1e-12 * along, (along, across)
@@ -865,7 +875,7 @@ def test_a_face_turning_about_a_vertex_pivots_until_the_vertex_cannot_hold_it(sp
     plain = jax.tree.map(np.asarray, state)
     corners = np.asarray(model.corners)
     # the vertex as a pivot on the face's only support (a triangle: its three vertices)
-    f, F, _ = _vertex_at_rest(scene, plain, corners, face, vertex)
+    f, F, _, _ = _vertex_at_rest(scene, plain, corners, face, vertex)
     cone = mu * f[face.index(vertex)] - np.linalg.norm(F)
     if spin < 10:
         mode = chosen.mode
@@ -881,6 +891,53 @@ def test_a_face_turning_about_a_vertex_pivots_until_the_vertex_cannot_hold_it(sp
     else:
         assert cone < 0  # no pivot can hold it
         _assert_starts_from_rest(chosen, margins, scene, plain, vertex, mass)
+
+
+@persistent
+def _narrow_box_choice(state, friction):
+    """The mode `NARROW_BOX` takes at the start, at `state`: the choice, its margins
+    (m/s^2), the points resting."""
+    scene = narrow_box_scene(friction)
+    return _choice_at_event(0.0, state, scene, flight_mode(jnp.float64), jnp.array(-1))[:3]
+
+
+def test_a_face_tipping_onto_an_edge_starts_its_corner_at_rest_in_an_admissible_direction():
+    """The narrow box on its end, turning about a corner at 1 rad/s with friction 1.5: no mode
+    of the face fits (sliding, the friction at its base tips it), and it tips onto an edge
+    through that corner, the corner starting to slide from rest while the edge's other end
+    slides on. Scanned round the circle, the corner's slip turns back through a pole as well
+    as through roots: near the direction in which the edge's contact problem is singular
+    the forces change sign through infinity, and the slip's acceleration along the
+    direction is the largest there. A bracket counts only where the forces are admissible
+    at both of its ends; checked against the edge's contact problem solved here: the normal
+    forces push, the corner's slip accelerates along the direction found, the end face's
+    other two corners rise."""
+    state, corner = narrow_box_on_end(1.0)
+    mu = 1.5
+    chosen, margins, resting = _narrow_box_choice(state, mu)
+    model = contact_model(NARROW_BOX)
+    face = sorted(int(i) for i in model.face_points[0])
+    assert np.flatnonzero(np.asarray(resting)).tolist() == face
+    assert bool(chosen.consistent)
+    mode = chosen.mode
+    assert int(mode.kind) == PAIR and int(mode.a) == corner and int(mode.b) in face
+    assert np.asarray(mode.stick).tolist() == [False, False]
+    assert np.asarray(mode.from_rest).tolist() == [True, False]
+    scene = narrow_box_scene(mu)
+    plain = jax.tree.map(np.asarray, state)
+    edge = [corner, int(mode.b)]
+    start = np.asarray(mode.slide_dir[0])
+    corners = np.asarray(model.corners)
+    f, _, slip_acc, normal = _vertex_at_rest(scene, plain, corners, edge, corner, start)
+    along = slip_acc @ start
+    across = np.cross(start, slip_acc)[2]
+    assert np.all(f > 0) and along > 0 and abs(across) <= 1e-12 * along, (f, along, across)
+    others = [i for i in face if i not in edge]
+    assert np.all(normal[others] > 1.0), normal[others]  # m/s^2: they rise
+    mass = float(scene.body.mass)
+    P = model.num_points
+    np.testing.assert_allclose(np.asarray(margins[P : P + 2]), f / mass, rtol=1e-9)
+    np.testing.assert_allclose(float(margins[P + NUM_FORCE_CONDITIONS]), along, rtol=1e-9)
 
 
 def test_a_shape_without_pairs_has_no_pair_search_in_its_program(monkeypatch):

@@ -22,8 +22,11 @@ import numpy as np
 import pytest
 from programs import persistent
 from scipy.integrate import solve_ivp
+from turning_states import NARROW_BOX, narrow_box_on_end, narrow_box_scene
 
 import jaxrb
+from benchmarks.face_vertex_lcp import vertex_problem
+from jaxrb.contact import contact_model
 
 L, W, M, G = 0.5, 0.01, 1.0, 9.81
 I_ROD = M * L**2 / 3
@@ -178,3 +181,50 @@ def test_consistent_sliding_follows_the_planar_equations(rods):
             np.testing.assert_allclose(first, t_event, atol=1e-8)
         checked += before.sum()
     assert checked >= 12
+
+
+# ------------------------------------------------ a narrow box tipping while it turns
+@persistent
+def _narrow_boxes(state0, friction):
+    ts = jnp.linspace(0.0, 0.02, 3)
+
+    def one(mu):
+        return jaxrb.simulate(narrow_box_scene(mu), state0, ts, throw=False, max_impacts=60)
+
+    return jax.vmap(one)(friction)
+
+
+def test_a_narrow_box_tipping_while_it_turns_stops_where_its_edge_problem_turns_singular():
+    """The narrow box (24 x 8 x 8 mm) on its end, turning about a corner at 1 rad/s, tips onto
+    an edge through that corner, both ends sliding. With friction 1.5 (a rod of its
+    proportions, sliding across the edge, meets the paradox above 1.44) the edge's normal
+    problem turns singular within 15 microseconds: the forces grow without bound and pass
+    through a pole, where the event function falls as if a force had reached zero. Nothing
+    fits after it, whatever the event excludes: the run stops with `painleve_paradox`
+    (before, it chattered between the edge and one corner to `max_events`). Checked at the
+    state where it stopped, on the two ends' normal problem built here with each end's
+    friction along its own slip: the end that was to lift pushes itself into the floor
+    (the problem is not a P-matrix), and the 2 x 2 problem is singular to 1e-2 of its
+    diagonal. With friction 1.2 the box comes down onto its end and rests there."""
+    traj = _narrow_boxes(narrow_box_on_end(1.0)[0], jnp.array([1.5, 1.2]))
+    codes = np.asarray(traj.result._value)
+    assert codes.tolist() == [
+        jaxrb.RESULTS.painleve_paradox._value,
+        jaxrb.RESULTS.successful._value,
+    ]
+    stop = float(traj.contact.event_time[0, int(traj.contact.events[0])])
+    assert 0.0 < stop < 2e-5
+    last = jax.tree.map(lambda x: np.asarray(x[0, -1]), traj.states)
+    scene = narrow_box_scene(1.5)
+    corners = np.asarray(contact_model(NARROW_BOX).corners)
+    heights = last.pos[2] + corners @ np.asarray(jaxrb.quat_to_matrix(jnp.asarray(last.quat)))[2]
+    edge = np.flatnonzero(heights < 1e-12)
+    assert len(edge) == 2
+    A, _, _ = vertex_problem(scene, last, corners[edge])
+    assert min(A[0, 0], A[1, 1]) < 0, A  # N/(m/s^2): one end alone is pushed into the floor
+    assert abs(np.linalg.det(A)) < 1e-2 * abs(A[0, 0] * A[1, 1]), A
+    # friction 1.2: on its end at rest, its energy never rising between saves
+    assert jaxrb.contact.KIND_NAMES[int(traj.contact.kind[1, -1])] == "face"
+    assert float(np.linalg.norm(traj.states.vel[1, -1])) < 1e-9
+    energy = jaxrb.energy(narrow_box_scene(1.2), jax.tree.map(lambda x: x[1], traj.states))
+    assert np.all(np.diff(np.asarray(energy)) <= 1e-15)

@@ -1,13 +1,15 @@
 """States of a d12 lying flat on a face and turning about the vertical: the tests of a face
 that slides on three of its vertices (`Mode.support`), and of such a face at high friction
-coming down pivoting about a vertex; and the attitude that turns a shape's first face
-down, which the mode choice's tests start from too."""
+coming down pivoting about a vertex; the attitude that turns a shape's first face down,
+which the mode choice's tests start from too; and a narrow box standing on its end,
+turning about a corner (a face that tips onto an edge, and the Painlevé paradox)."""
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 import jaxrb
+from jaxrb.contact import contact_model
 
 
 def first_face_down(model):
@@ -49,3 +51,29 @@ def flat_turning_states(model, key, n):
         return jaxrb.State(jnp.array([0.0, 0.0, height]), q, jnp.cross(w, -pivot), omega)
 
     return jax.vmap(place)(yaw, angle, distance, spin)
+
+
+# a box of 24 x 8 x 8 mm (5 g) standing on an end face, turning about one of its corners
+NARROW_BOX = jaxrb.Box((0.012, 0.004, 0.004))
+
+
+def narrow_box_on_end(spin):
+    """The state of `NARROW_BOX` standing on its first face (an end), turning about the
+    vertical through that face's first corner at `spin` (rad/s), and that corner's index."""
+    model = contact_model(NARROW_BOX)
+    base, world = first_face_down(model)
+    corner = int(model.face_points[0][0])
+    w = np.array([0.0, 0.0, spin])
+    state = jaxrb.State(
+        jnp.array([0.0, 0.0, -np.min(world[:, 2])]),
+        base,
+        jnp.asarray(np.cross(w, -world[corner])),
+        jaxrb.quat_to_matrix(base).T @ jnp.asarray(w),
+    )
+    return state, corner
+
+
+def narrow_box_scene(friction):
+    """`NARROW_BOX` (5 g) under gravity on a level floor of restitution 0.5 and `friction`."""
+    body = jaxrb.RigidBody(0.005, shape=NARROW_BOX)
+    return jaxrb.Scene(body, (jaxrb.Gravity(),), floor=jaxrb.Floor(0.5, friction))

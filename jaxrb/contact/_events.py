@@ -41,6 +41,7 @@ from ._modes import (
     on_pivot,
     on_support,
     point_coefficients,
+    support_vertex_b,
     support_vertex_starts,
 )
 
@@ -79,7 +80,7 @@ def force_margins(lam, rows, mode, model, geom, mu) -> jax.Array:
     # support's load
     pivot = on_pivot(mode)
     vertex_forces = rows.support_map @ lam[:3]
-    pivot_force = vertex_forces @ (mode.support == mode.b).astype(dtype)
+    pivot_force = vertex_forces @ support_vertex_b(mode).astype(dtype)
     cone_b = jnp.where(pivot, mu_b * pivot_force - _safe_norm(lam[3:5]), cone_b)
     axial = (
         _sqrt_pos((mu_a * lam[0]) ** 2 - lam[2] ** 2)
@@ -109,7 +110,7 @@ def slowest_support_vertex(geom, mode) -> jax.Array:
     vertex `b` left out where that one sticks or starts from rest (its slip is watched at
     slot b); any other mode: its point a."""
     vertices = jnp.where(on_support(mode), mode.support, mode.a)
-    apart = (on_pivot(mode) | support_vertex_starts(mode)) & (vertices == mode.b)
+    apart = (on_pivot(mode) | support_vertex_starts(mode)) & support_vertex_b(mode)
     return vertices[jnp.argmin(jnp.where(apart, jnp.inf, _safe_norm(geom.slip[vertices])))]
 
 

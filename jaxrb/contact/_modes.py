@@ -116,6 +116,12 @@ def support_vertex_starts(mode: Mode) -> jax.Array:
     return on_support(mode) & ~mode.stick[1] & mode.from_rest[1]
 
 
+def support_vertex_b(mode: Mode) -> jax.Array:
+    """(3,) which of a support's vertices is the mode's point `b` (the pivot, or the vertex
+    starting from rest); all False off a support."""
+    return on_support(mode) & (mode.support == mode.b)
+
+
 def flight_mode(dtype) -> Mode:
     zero = jnp.array(0, jnp.int32)
     return Mode(
@@ -450,7 +456,7 @@ def support_friction(geom, mode, rc, mu, hat_b):
     (3, 3) and its couple about the face's centre (3, 3) per unit of each multiplier,
     world)."""
     vertices, q, G_inv = support_loads(geom, mode, rc)
-    own = vertices == mode.b
+    own = support_vertex_b(mode)
     slides = ~(own & on_pivot(mode))
     starts = own & support_vertex_starts(mode)
     directions = jnp.where(starts[:, None], hat_b, unit_or(geom.slip[vertices], jnp.zeros_like(q)))
@@ -876,8 +882,7 @@ def column_rates(geom: Geometry, mode: Mode, mu, model, support_map) -> jax.Arra
         rc = geom.R @ centres[mode.face]
         d = d.at[2, :, 0].set(column(rc, force, couple))
         if has_supports(model):  # a support's vertex b starting from rest: along hat b
-            vertices = jnp.where(on_support(mode), mode.support, 0)
-            own = (vertices == mode.b).astype(dtype)
+            own = support_vertex_b(mode).astype(dtype)
             share = jnp.where(support_vertex_starts(mode), own @ support_map, 0.0)
             friction = column(geom.r[mode.b], -mu[mode.b] * eye)  # (3, 6): per component
             d = d.at[1, :, :3].add(share[None, :, None] * friction[:, None, :])

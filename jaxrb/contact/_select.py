@@ -29,6 +29,7 @@ from ._modes import (
     on_support,
     only_where_needed,
     point_coefficients,
+    support_vertex_b,
     tree_index,
     tree_where,
     tree_zeros,
@@ -60,9 +61,12 @@ def scan_direction(measure, n, t1, t2, dtype, slack):
 
     angle = jnp.arange(DIRECTIONS, dtype=dtype) * step
     turn, along, admissible = jax.vmap(at)(angle)
-    nxt, along_nxt = jnp.roll(turn, -1), jnp.roll(along, -1)
+    nxt, along_nxt, nxt_ok = jnp.roll(turn, -1), jnp.roll(along, -1), jnp.roll(admissible, -1)
     bracket = ((turn <= 0) & (nxt > 0)) | ((turn >= 0) & (nxt < 0))
-    good = bracket & (jnp.maximum(along, along_nxt) >= 0) & admissible
+    # admissible at both ends: where the forces change sign within a bracket they pass
+    # through a pole (the contact problem singular for some direction), and so does the
+    # turning rate, which changes sign there without a root
+    good = bracket & (jnp.maximum(along, along_nxt) >= 0) & admissible & nxt_ok
     best = jnp.argmax(jnp.where(good, jnp.maximum(along, along_nxt), -jnp.inf))
 
     def regula_falsi(_, bracket):  # kept inside the bracket; each end: (angle, at(angle))
@@ -74,7 +78,6 @@ def scan_direction(measure, n, t1, t2, dtype, slack):
         left = jnp.sign(new[1]) == jnp.sign(f_lo)
         return tree_where(left, new, lo), tree_where(left, hi, new)
 
-    nxt_ok = jnp.roll(admissible, -1)
     lo, hi = jax.lax.fori_loop(
         0,
         REFINEMENTS,
@@ -286,12 +289,10 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
     # a shape without pairs (a ball on one surface) has no pair modes: no pair searches
     exact_a = exact_b = exact_pair = jnp.array(False)
     if model.pairs:
+        rests = (rest_a, rest_b, starts)
         hats0, exact_a, exact_b, exact_pair = _pair_directions(
-            geom, mode, hats0, rest_a, rest_b, (scan_dir, found), live, solve, relative, dtype
+            geom, mode, hats0, rests, (scan_dir, found), live, solve, relative, dtype
         )
-    exact_start = starts & found  # a support's vertex starting from rest: scanned as well
-    hats0 = (hats0[0], jnp.where(exact_start, scan_dir, hats0[1]), hats0[2])
-    exact_b = exact_b | exact_start
     small = 1e-6 * (1.0 + _safe_norm(held.acc))  # slip accelerations below this: keep the seed
 
     def slip_rates(sol):  # relative to the stabilisation's targets, as every condition
@@ -359,7 +360,7 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
         ~(mode.stick[0] & ~zero_slip[mode.a]) & ~(mode.stick[1] & ~zero_slip[mode.b]),
     )
     # (but its vertex b, at rest where it pivots or starts to slide from rest)
-    at_rest = (on_pivot(mode) | starts) & (vertices == mode.b)
+    at_rest = (on_pivot(mode) | starts) & support_vertex_b(mode)
     still = still & ~(support & jnp.any(still_vertices != at_rest))
     # the Painlevé paradox: a contact that slides (not from rest) on a normal problem that
     # is not a P-matrix, while every resting point the mode does not hold stays clear of the
@@ -373,16 +374,19 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
     return chosen, jnp.concatenate([gap_margin, force, align]), still, paradox
 
 
-def _pair_directions(geom, mode, hats0, rest_a, rest_b, scanned, live, solve, relative, dtype):
+def _pair_directions(geom, mode, hats0, rests, scanned, live, solve, relative, dtype):
     """The sliding directions from rest of a pair's ends (`_candidate`): one end sliding,
     the other from rest, from the candidate's scan (`scanned`: its direction and whether
-    it found one); both from rest, by Newton. `solve(hats)` solves the candidate for given
-    directions, `relative(sol)` its point accelerations relative to the stabilisation's
-    targets. Returns the directions and which are exact (a, b, both)."""
+    it found one), as a support's vertex b starting from rest; both from rest, by Newton.
+    `rests`: whether end a, end b, a support's vertex b start from rest. `solve(hats)`
+    solves the candidate for given directions, `relative(sol)` its point accelerations
+    relative to the stabilisation's targets. Returns the directions and which are exact
+    (a, b, both)."""
     pair = mode.kind == PAIR
+    rest_a, rest_b, starts = rests
     end_dir, end_found = scanned
     exact_a = pair & rest_a & ~rest_b & end_found
-    exact_b = pair & rest_b & ~rest_a & end_found
+    exact_b = ((pair & rest_b & ~rest_a) | starts) & end_found
     hats0 = (
         jnp.where(exact_a, end_dir, hats0[0]),
         jnp.where(exact_b, end_dir, hats0[1]),
@@ -505,6 +509,7 @@ def select_mode(
     # where no candidate fits, those a stopped slip readmits (`exclusions`) are tried
     excluded, readmitted = exclusions(table, candidates, model, old, trigger, zero_slip)
     relaxed = admissible & (~excluded | readmitted)
+    held_resting = admissible
     admissible = admissible & ~excluded
 
     # a chunk of candidates at a time (under vmap side by side), in the table's order, until
@@ -554,8 +559,11 @@ def select_mode(
     # the Painlevé paradox: with no consistent mode, a sliding contact on a normal problem
     # that is not a P-matrix has no solution; a consistent mode of that kind has a rival (the
     # contact lifting off), and the mode without it is taken
+    # (with no consistent mode, whatever the event excluded: the forces of a sliding mode
+    # whose normal problem turns singular pass through a pole, which the event function
+    # takes for a force reaching zero)
+    painleve = ~any_ok & jnp.any(held_resting & jnp.repeat(was_tested, size) & still & paradox)
     paradox = admissible & paradox
-    painleve = ~any_ok & jnp.any(paradox)
     ambiguous = any_ok & jnp.any(ok & paradox) & jnp.any(plain)
     # the first in the table's order of preference
     first_of = lambda mask: jnp.argmin(jnp.where(mask, candidates, len(table)))  # noqa: E731
