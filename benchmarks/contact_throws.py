@@ -113,7 +113,8 @@ PLURAL.update(
 # U(0.2, 0.8): high enough for the Painlevé paradox (docs/contact.md, section 3)
 SHAPES["bar"] = (0.005, lambda: jaxrb.Box(jnp.array([0.012, 0.004, 0.004])), 0.004, 4.0)
 PLURAL["bar"] = "bars"
-FRICTION = {"bar": (0.3, 1.5)}  # the range friction U(0.2, 0.8) is mapped onto
+THROW_FRICTION = (0.2, 0.8)  # the floors' friction of `throws`: uniform in this range
+FRICTION = {"bar": (0.3, 1.5)}  # the range THROW_FRICTION is mapped onto
 FLOORS = {
     "ball_in_bowl": lambda e, mu: jaxrb.Bowl(e, mu, radius=0.3, rolling_resistance=0.01),
     "ball_on_cone": lambda e, mu: jaxrb.Cone(
@@ -158,7 +159,7 @@ def throws(n, seed, uniform_attitude=False):
     vel = jnp.concatenate([u(k[3], -0.5, 0.5, (n, 2)), jnp.zeros((n, 1))], -1)
     omega = u(k[4], -40.0, 40.0, (n, 3))
     state = jaxrb.make_state(pos=pos, quat=quat, vel=vel, omega=omega)
-    return state, u(k[5], 0.2, 0.8), u(k[6], 0.2, 0.8)
+    return state, u(k[5], 0.2, 0.8), u(k[6], *THROW_FRICTION)
 
 
 def run(kind, n, seed, chunk, rtol, max_impacts, members=None):
@@ -186,7 +187,8 @@ def run(kind, n, seed, chunk, rtol, max_impacts, members=None):
     args = throws(n, seed)
     if kind in FRICTION:
         lo, hi = FRICTION[kind]
-        args = (*args[:2], lo + (args[2] - 0.2) * (hi - lo) / 0.6)
+        low, high = THROW_FRICTION
+        args = (*args[:2], lo + (args[2] - low) * (hi - lo) / (high - low))
     if members is not None:
         args = jax.tree.map(lambda x: x[np.asarray(members)], args)
         n = len(members)

@@ -411,6 +411,55 @@ def test_a_slide_from_rest_ends_when_its_slip_turns_back_or_friction_pushes_it_o
     assert CREEP[0] + 0.5 * BLEND > 0 and -0.4 * BLEND + 0.5 * BLEND > 0
 
 
+# d12 614 of `throws(1000, 1)` (restitution 0.7213, friction 0.7873) at 1.893640411234179 s,
+# where a series of ever shorter rocks from vertex 1 to vertex 9 and back ended with vertex 1's
+# slip stopping and vertex 9 touching down with a slip just above slip_stop (position m,
+# quaternion, velocity m/s, omega rad/s, body)
+ROCKING_ONTO_AN_EDGE = (
+    (-0.015944900637862573, -0.36949589408214334, 0.010770101239737038),
+    (-0.43910702898125176, -0.894572257156564, 0.0831317870012503, -0.0038209704326869444),
+    (0.05543244538045575, 0.05715147313299382, -0.03529774810450038),
+    (-5.981891296687682, -2.2847800326048184, -3.695410548606192),
+)
+
+
+@persistent
+def _d12_throw_from(state0, restitution, friction, ts):
+    """The d12 of `contact_throws` from `state0` over the save times `ts` (s), at the
+    benchmark's tolerances, with a budget of 5000 steps."""
+    scene = _throw_scene("d12", restitution, friction)
+    settings = dict(rtol=1e-8, atol=1e-8, max_steps=5000, max_impacts=200)
+    return jaxrb.simulate(scene, state0, ts, throw=False, **settings)
+
+
+def test_a_slide_whose_slip_starts_below_the_stop_speed_ends_at_once():
+    """d12 614 of `throws(1000, 1)` came down onto its edge (1, 9) as vertex 1's slip
+    stopped and vertex 9's was 1e-5 m/s, just above slip_stop: the edge with end 1 sliding
+    from rest and end 9 sliding. The projection onto that mode (both ends' normal
+    velocities and end 1's slip held at zero) left end 9's slip at 1e-7 m/s, below half
+    the stop speed, where its slip condition starts; shifted by the band's tolerance, it
+    could never fire, and friction along a slip of 1e-7 m/s, whose direction is
+    roundoff's, held the solver to steps of 2e-8 s: the throw ran out of steps (100000) in
+    0.4 ms. Now such a slide ends at once, and the edge sticks at both ends: the die rocks
+    about it, its energy conserved."""
+    _, restitution, friction = throws(1000, 1)
+    state = jaxrb.State(*map(jnp.asarray, ROCKING_ONTO_AN_EDGE))
+    state = jaxrb.State(state.pos, jaxrb.quat_normalize(state.quat), state.vel, state.omega)
+    ts = jnp.linspace(0.0, 1e-3, 11)
+    # (built here first: `shape_of` measures the die eagerly, which it cannot under `jit`)
+    scene = _throw_scene("d12", restitution[614], friction[614])
+    traj = _d12_throw_from(state, restitution[614], friction[614], ts)
+    assert traj.result == jaxrb.RESULTS.successful
+    assert int(traj.num_steps) < 100
+    log = traj.contact
+    assert jaxrb.contact.CAUSES[int(log.event_cause[1])] == "slip stops"
+    assert float(log.event_time[1]) < 1e-8
+    assert jaxrb.contact.KIND_NAMES[int(log.event_kind[1])] == "pair"
+    assert not bool(log.event_sliding[1])
+    energy = np.asarray(jax.vmap(lambda s: jaxrb.energy(scene, s))(traj.states))
+    assert np.max(np.abs(np.diff(energy))) < 1e-9 * energy[0], energy
+
+
 # ------------------------------------------------- the mode choice against testing every mode
 
 CHOICE_SHAPES = (jaxrb.Box((0.008, 0.006, 0.004)), jaxrb.dice.d12(0.01).shape)
@@ -617,15 +666,43 @@ CONE_EDGE_OF_A_PIVOTING_EDGE = (
 def _die_choice(t, state, restitution, friction, old, trigger, kind="d12"):
     """`_choice_at_event` for a die of `contact_throws` (`kind`, static) at time `t` (s):
     the choice, the chosen mode's margins (m/s^2), the points resting, their gap rates
-    (m/s), and the friction (world, N) and normal force (N) at `old`'s end a in `old`
-    itself."""
+    (m/s), and the friction (world, N) and normal force (N) at `old`'s ends a and b (a
+    pair's; (2, 3) and (2,)) in `old` itself."""
     scene = _throw_scene(kind, restitution, friction)
     chosen, margins, resting, _, geom = _choice_at_event(t, state, scene, old, trigger)
     model = contact_model(scene.body.shape)
     held = solve_mode(t, state, old, scene, model, TOL, geom=geom)
-    d = held.rows.J[:, :3]
-    friction_a = held.lam[2] * d[2] + held.lam[3] * d[3]
-    return chosen, margins, resting, geom.gap_rate, friction_a, held.lam[0]
+    d, lam = held.rows.J[:, :3], held.lam
+    friction = jnp.stack([lam[2] * d[2] + lam[3] * d[3], lam[4] * d[4] + lam[5] * d[5]])
+    return chosen, margins, resting, geom.gap_rate, friction, lam[:2]
+
+
+def _ended_pair(a, b, stick):
+    """The pair mode of points `a` and `b` (`stick`: whether each end sticks) as the mode
+    an event ended."""
+    return eqx.tree_at(
+        lambda m: (m.kind, m.a, m.b, m.stick),
+        flight_mode(jnp.float64),
+        (
+            jnp.array(PAIR, jnp.int32),
+            jnp.array(a, jnp.int32),
+            jnp.array(b, jnp.int32),
+            jnp.array(stick),
+        ),
+    )
+
+
+def _d12_event(seed, member, state, old, condition, t):
+    """`_die_choice` for the d12 `member` of `throws(1000 if seed else 300, seed)` at time
+    `t` (s) and `state` (position, quaternion, velocity, omega: body), after the force
+    condition `condition` (`_events.py`) of `old` ended a segment; and the throw's scene
+    and state."""
+    _, restitution, friction = throws(1000 if seed else 300, seed)
+    scene = _throw_scene("d12", restitution[member], friction[member])
+    state = jaxrb.State(*map(jnp.asarray, state))
+    trigger = jnp.array(len(contact_model(scene.body.shape).corners) + condition)
+    e, mu = restitution[member], friction[member]
+    return _die_choice(t, state, e, mu, old, trigger), scene, state
 
 
 def test_a_pivoting_edge_whose_sticking_end_reaches_the_cone_slides_on_from_rest():
@@ -637,25 +714,13 @@ def test_a_pivoting_edge_whose_sticking_end_reaches_the_cone_slides_on_from_rest
     was refused and the candidate fell back on the direction of both ends sticking, from
     which the fixed point ran to a direction whose slip decelerates (-0.94 m/s^2): no mode
     was consistent."""
-    states, restitution, friction = throws(300, 0)
-    e, mu = restitution[69], friction[69]
-    state = jaxrb.State(*map(jnp.asarray, CONE_EDGE_OF_A_PIVOTING_EDGE))
-    old = eqx.tree_at(
-        lambda m: (m.kind, m.a, m.b, m.stick),
-        flight_mode(jnp.float64),
-        (
-            jnp.array(PAIR, jnp.int32),
-            jnp.array(5, jnp.int32),
-            jnp.array(9, jnp.int32),
-            jnp.array([True, False]),
-        ),
-    )
-    num_points = contact_model(shape_of("d12")[1]()).num_points
-    cone_a = jnp.array(num_points + CONE_A)
+    old = _ended_pair(5, 9, [True, False])
     t = 0.7010875018938936
-    chosen, margins, _, _, friction_a, normal_a = _die_choice(t, state, e, mu, old, cone_a)
+    choice, scene, _ = _d12_event(0, 69, CONE_EDGE_OF_A_PIVOTING_EDGE, old, CONE_A, t)
+    chosen, margins, _, _, friction, normal = choice
+    mu = scene.floor.friction
     # the event left end 5's friction on the cone's edge
-    friction_a, normal_a = np.asarray(friction_a), float(normal_a)
+    friction_a, normal_a = np.asarray(friction[0]), float(normal[0])
     assert normal_a > 0
     np.testing.assert_allclose(np.linalg.norm(friction_a), float(mu) * normal_a, rtol=1e-9)
     assert bool(chosen.consistent)
@@ -667,6 +732,92 @@ def test_a_pivoting_edge_whose_sticking_end_reaches_the_cone_slides_on_from_rest
     np.testing.assert_allclose(start, -friction_a / np.linalg.norm(friction_a), atol=1e-9)
     used = np.abs(np.asarray(margins)) < 1e29
     assert np.all(np.asarray(margins)[used] >= -1e-12), margins
+
+
+# d12 733 of `throws(1000, 1)`, its mode choices traced (which moves its course at roundoff
+# from the benchmark's), at 0.5091903879665312 s (position m, quaternion, velocity m/s, omega
+# rad/s, body) as the event there left it: on an edge (its points 6 and 18), end 6 sliding
+# and end 18 sticking, end 18's friction had reached the cone
+CONE_EDGE_BESIDE_A_LIGHT_END = (
+    (-0.01839731692901036, -0.11067778923329409, 0.01060698295354669),
+    (-0.9451653891564543, 0.0027113130357976434, -0.31443239646893006, 0.08824570229283656),
+    (-0.12926080815694257, -0.018965232292058824, -0.07717895950062478),
+    (12.19952257242879, -11.701197260763234, -1.660685855522938),
+)
+
+
+def test_an_edge_end_reaching_its_cone_beside_a_light_end_slides_on_from_rest():
+    """d12 733 of `throws(1000, 1)` pivoted on an edge, end 18 sticking while end 6 slid
+    carrying a normal force of 0.07 m/s^2 per unit mass, until end 18's friction reached
+    the cone. The next mode is the edge with end 18 sliding from rest opposite to that
+    friction, with the same forces (the slip starts with no acceleration). Across the scan's
+    bracket of that root the light end's force changes sign (its friction turns with end
+    18's), and a bracket counted only where the forces were admissible at both of its ends
+    (to pass over poles): no root was found, nothing fitted, and the least inconsistent mode
+    (end 18 alone, end 6 sinking into the floor) began a chatter of 794 events without a
+    consistent mode, every 4e-9 s, to `max_events`. Checked against the edge's contact
+    problem solved in numpy (`_vertex_at_rest`)."""
+    old = _ended_pair(6, 18, [False, True])
+    t = 0.5091903879665312
+    choice, scene, state = _d12_event(1, 733, CONE_EDGE_BESIDE_A_LIGHT_END, old, CONE_B, t)
+    chosen, margins = choice[:2]
+    mu = scene.floor.friction
+    corners = np.asarray(contact_model(scene.body.shape).corners)
+    # the edge sticking at 18 in numpy: its friction on the cone's edge
+    f_stick, F_stick, _, _ = _vertex_at_rest(scene, state, corners, (6, 18), 18)
+    np.testing.assert_allclose(np.linalg.norm(F_stick), float(mu) * f_stick[1], rtol=1e-9)
+    assert 0 < f_stick[0] < 0.02 * f_stick[1]  # end 6 light
+    assert bool(chosen.consistent)
+    mode = chosen.mode
+    assert (int(mode.kind), int(mode.a), int(mode.b)) == (PAIR, 6, 18)
+    assert np.asarray(mode.stick).tolist() == [False, False]
+    assert np.asarray(mode.from_rest).tolist() == [False, True]
+    start = np.asarray(mode.slide_dir[1])
+    np.testing.assert_allclose(start, -F_stick / np.linalg.norm(F_stick), atol=1e-6)
+    f, _, slip_acc, _ = _vertex_at_rest(scene, state, corners, (6, 18), 18, start)
+    np.testing.assert_allclose(f, f_stick, rtol=1e-6)
+    assert np.linalg.norm(slip_acc) < 1e-5  # m/s^2, against 9.81 m/s^2 of gravity
+    used = np.abs(np.asarray(margins)) < 1e29
+    assert np.all(np.asarray(margins)[used] >= -1e-12), margins
+
+
+# d12 586 of `throws(1000, 1)`, its mode choices traced, at 0.7764385324346504 s, as the event
+# there left it: on an edge (its points 7 and 15) at rest to 1e-5 m/s, rocking about it, end 7
+# sticking and end 15 sliding, end 7's friction had reached the cone
+CONE_EDGE_OF_A_ROCKING_EDGE = (
+    (-0.1045971977964378, 0.05717531837842946, 0.010408384975707539),
+    (-0.5609324534869617, -0.015232815021526102, -0.7205237119683447, 0.4073921016207544),
+    (0.01416405077036097, 0.004286634795714424, 0.00784931835133056),
+    (-0.44025918735020864, 0.7105582877484816, -1.1506168730378148),
+)
+
+
+def test_an_edge_end_reaching_its_cone_as_the_other_ends_slip_stops_sticks_at_both():
+    """d12 586 of `throws(1000, 1)` rocked about an edge at rest, end 7 sticking and end 15
+    sliding (8.5e-6 m/s), until end 7's friction reached its cone as end 15's slip fell
+    below slip_stop. The event ruled out every mode with end 7 sticking, which left end 7
+    starting from rest (end 15's friction would leave its cone) and both ends from rest
+    (their slips would decelerate): no consistent mode, and the die went on chattering
+    between the two. But with end 15's slip gone, end 7's friction with end 15 sticking is
+    another friction, which the event has not tested (as a lift-off beside a stopped slip):
+    the edge sticks at both ends, every margin above 1 m/s^2."""
+    old = _ended_pair(7, 15, [True, False])
+    t = 0.7764385324346504
+    choice, scene, _ = _d12_event(1, 586, CONE_EDGE_OF_A_ROCKING_EDGE, old, CONE_A, t)
+    chosen, margins, resting, _, friction, normal = choice
+    mu = scene.floor.friction
+    assert np.flatnonzero(np.asarray(resting)).tolist() == [7, 15]
+    # the event left end 7's friction on the cone's edge (2.9e-4 beyond it, solved again at
+    # the event's state: end 15's friction turns with its slip of 8.5e-6 m/s)
+    np.testing.assert_allclose(
+        np.linalg.norm(np.asarray(friction[0])), float(mu) * float(normal[0]), rtol=1e-3
+    )
+    assert bool(chosen.consistent)
+    mode = chosen.mode
+    assert (int(mode.kind), int(mode.a), int(mode.b)) == (PAIR, 7, 15)
+    assert np.asarray(mode.stick).tolist() == [True, True]
+    used = np.abs(np.asarray(margins)) < 1e29
+    assert np.all(np.asarray(margins)[used] > 1.0), margins
 
 
 # d12s of `contact_throws --n 300` (seed 0) at an event as a vertex's slip stopped: the

@@ -200,8 +200,9 @@ def test_a_narrow_box_tipping_while_it_turns_stops_where_its_edge_problem_turns_
     proportions, sliding across the edge, meets the paradox above 1.44) the edge's normal
     problem turns singular within 15 microseconds: the forces grow without bound and pass
     through a pole, where the event function falls as if a force had reached zero. Nothing
-    fits after it, whatever the event excludes: the run stops with `painleve_paradox`
-    (before, it chattered between the edge and one corner to `max_events`). Checked at the
+    fits after it, whatever the event excludes: the run stops with `painleve_paradox`, the
+    event log marking that event, and only it, as without a consistent mode (before, it
+    chattered between the edge and one corner to `max_events`). Checked at the
     state where it stopped, on the two ends' normal problem built here with each end's
     friction along its own slip: the end that was to lift pushes itself into the floor
     (the problem is not a P-matrix), and the 2 x 2 problem is singular to 1e-2 of its
@@ -212,8 +213,14 @@ def test_a_narrow_box_tipping_while_it_turns_stops_where_its_edge_problem_turns_
         jaxrb.RESULTS.painleve_paradox._value,
         jaxrb.RESULTS.successful._value,
     ]
-    stop = float(traj.contact.event_time[0, int(traj.contact.events[0])])
+    last_event = int(traj.contact.events[0])
+    stop = float(traj.contact.event_time[0, last_event])
     assert 0.0 < stop < 2e-5
+    # the stop is the one event without a consistent mode, and the event log marks it
+    assert int(traj.contact.inconsistent[0]) == 1
+    assert np.flatnonzero(np.asarray(traj.contact.event_inconsistent[0])).tolist() == [last_event]
+    marked = np.asarray(traj.contact.event_inconsistent[1])
+    assert int(np.sum(marked)) == int(traj.contact.inconsistent[1])
     last = jax.tree.map(lambda x: np.asarray(x[0, -1]), traj.states)
     scene = narrow_box_scene(1.5)
     corners = np.asarray(contact_model(NARROW_BOX).corners)

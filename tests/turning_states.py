@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxrb
+from benchmarks.contact_throws import shape_of
 from jaxrb.contact import contact_model
 
 
@@ -53,8 +54,10 @@ def flat_turning_states(model, key, n):
     return jax.vmap(place)(yaw, angle, distance, spin)
 
 
-# a box of 24 x 8 x 8 mm (5 g) standing on an end face, turning about one of its corners
-NARROW_BOX = jaxrb.Box((0.012, 0.004, 0.004))
+# a box of 24 x 8 x 8 mm (5 g), the bars of the throws benchmark, here standing on an end
+# face, turning about one of its corners
+NARROW_MASS, _narrow_box = shape_of("bar")[:2]
+NARROW_BOX = _narrow_box()
 
 
 def narrow_box_on_end(spin):
@@ -75,5 +78,5 @@ def narrow_box_on_end(spin):
 
 def narrow_box_scene(friction):
     """`NARROW_BOX` (5 g) under gravity on a level floor of restitution 0.5 and `friction`."""
-    body = jaxrb.RigidBody(0.005, shape=NARROW_BOX)
+    body = jaxrb.RigidBody(NARROW_MASS, shape=NARROW_BOX)
     return jaxrb.Scene(body, (jaxrb.Gravity(),), floor=jaxrb.Floor(0.5, friction))

@@ -302,7 +302,7 @@ class ContactProgram(eqx.Module):
         mode = tree_where(moves_on, out.mode, carry["mode"])
         y = tree_where(moves_on, out.state, carry["y"])
         start, values0 = _solve_with_conditions(t0, y, mode, scene, model, tol)
-        offsets = start_offsets(values0, cond_tol)
+        offsets = start_offsets(values0, cond_tol, mode, model)
         # the event function and the step limit at the start, carried beside the state
         # (`_step_end.py`)
         carried0 = _carried(start, values0, mode, offsets, model, tol)

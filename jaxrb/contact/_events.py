@@ -49,6 +49,9 @@ NORMAL_A, NORMAL_B, CONE_A, CONE_B, AXIAL, SLIP_A, SLIP_B, COP, JUNCTION = range
 NUM_FORCE_CONDITIONS = 9
 UNUSED = 1e30
 JUNCTION_TOL = 1e-12  # of the junction margin (a difference of cosines)
+# a slide whose slip starts below half its stop speed ends once it falls this share of its
+# condition's tolerance (`start_offsets`)
+PROMPT = 1e-3
 # how far (in blend speeds) friction may push a slide from rest's slip on; above the quarter
 # blend speed that is the slip conditions' tolerance, so that the condition starts armed
 PUSH = 0.3
@@ -203,9 +206,18 @@ def condition_tolerances(model, tol, dtype) -> jax.Array:
     return jnp.asarray(np.concatenate([np.full(P, tol.penetration), force]), dtype)
 
 
-def start_offsets(values0, tolerances) -> jax.Array:
+def start_offsets(values0, tolerances, mode, model) -> jax.Array:
     """Shifts making each condition start positive when it starts at its boundary: a
-    condition at c0 <= tol fires once it has fallen tol below min(c0, 0)."""
+    condition at c0 <= tol fires once it has fallen tol below min(c0, 0). A slide (not
+    from rest) whose slip starts already below half the stop speed, which the projection
+    at an event can leave (it holds the other points' normal and stopped slips, and moves
+    this one's by as much), is over: its condition fires as soon as it falls at all
+    (`PROMPT` of its tolerance), where the band would never let it fire."""
+    P = model.num_points
     near = values0 <= tolerances
     shift = tolerances + jnp.maximum(-values0, 0.0)
+    slides = jnp.zeros(values0.shape, bool)
+    slides = slides.at[P + SLIP_A].set(~mode.from_rest[0]).at[P + SLIP_B].set(~mode.from_rest[1])
+    over = slides & (values0 < 0)
+    shift = jnp.where(over, PROMPT * tolerances - values0, shift)
     return jnp.where(near & (tolerances > 0), shift, 0.0)

@@ -316,6 +316,7 @@ def solve_variant(problem: ImpactProblem, e, mu, bilateral, tol) -> ImpactOutcom
     u = jnp.concatenate([state.vel, problem.w])
     c = jnp.where(present[:, None], J @ u, 0.0)  # (S, 3) m/s: normal, t1, t2
     dtype = c.dtype
+    tiny = jnp.finfo(dtype).tiny
     target = jnp.where(present, -e * jnp.minimum(c[:, 0], 0.0), 0.0)
     # derivatives flow through the polish's exact solve, not through the sweeps
     lam = _gauss_seidel(W, c, target, present, mu, bilateral, jnp.zeros_like(c), SWEEPS)
@@ -338,7 +339,6 @@ def solve_variant(problem: ImpactProblem, e, mu, bilateral, tol) -> ImpactOutcom
     # meet a slot's target: a corner landing as it slides 11 times faster than it approaches,
     # `mu` 1.5, whose sweeps alternate between no impulse and one whose friction lifts it)
     slips = c[:, 1:]
-    tiny = jnp.finfo(dtype).tiny
     away = slips / jnp.maximum(_safe_norm(slips), tiny)[:, None]
     swept = jnp.max(jnp.abs(lam[:, 0]))
     alone = jnp.where(
@@ -367,10 +367,11 @@ def solve_variant(problem: ImpactProblem, e, mu, bilateral, tol) -> ImpactOutcom
         jnp.array([[False] * c.shape[0]] * len(POLISH_MARGINS) + patterns, bool),
         jnp.array([True] * len(POLISH_MARGINS) + [False] * len(patterns)),
     )
-    start = (jnp.array(False), fits(violation(lam)))
+    swept_error = violation(lam)
+    start = (jnp.array(False), fits(swept_error))
     _, (polished, errors) = jax.lax.scan(polish, start, items)
     tries = jnp.concatenate([lam[None], polished])
-    errors = jnp.concatenate([violation(lam)[None], errors])
+    errors = jnp.concatenate([swept_error[None], errors])
     # prefer an exact (polished) solution on ties: derivatives flow through it only
     best = jnp.argmin(errors.at[0].set(2.0 * errors[0] + tol.velocity))
     lam = tries[best]
@@ -382,7 +383,6 @@ def solve_variant(problem: ImpactProblem, e, mu, bilateral, tol) -> ImpactOutcom
     # where the impulse acts: the point of its line of action on the tangent plane of the
     # first slot's point
     jn = impulse @ n[0]
-    tiny = jnp.finfo(dtype).tiny
     arm = cross(impulse, moment) / jnp.maximum(jnp.sum(impulse**2), tiny)
     lowest = problem.r[0]
     pushes = jn > 0

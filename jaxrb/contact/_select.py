@@ -40,6 +40,7 @@ from ._options import FORCE_TOL_PER_FORCE
 FIXED_POINT_ITERATIONS = 4
 DIRECTIONS = 64  # angles scanned for a sliding direction from rest
 REFINEMENTS = 10  # regula falsi steps on the chosen bracket
+ROOTED = 1e-2  # a refined root's turning rate below this share of its bracket's ends'
 NEWTON_ITERATIONS = 8  # for the two directions of a pair whose ends both slide from rest
 MAX_NEWTON_STEP = 0.5  # rad
 
@@ -63,11 +64,17 @@ def scan_direction(measure, n, t1, t2, dtype, slack):
     turn, along, admissible = jax.vmap(at)(angle)
     nxt, along_nxt, nxt_ok = jnp.roll(turn, -1), jnp.roll(along, -1), jnp.roll(admissible, -1)
     bracket = ((turn <= 0) & (nxt > 0)) | ((turn >= 0) & (nxt < 0))
-    # admissible at both ends: where the forces change sign within a bracket they pass
+    bracket = bracket & (jnp.maximum(along, along_nxt) >= 0)
+    # admissible at both ends: where the forces change sign within a bracket they may pass
     # through a pole (the contact problem singular for some direction), and so does the
-    # turning rate, which changes sign there without a root
-    good = bracket & (jnp.maximum(along, along_nxt) >= 0) & admissible & nxt_ok
-    best = jnp.argmax(jnp.where(good, jnp.maximum(along, along_nxt), -jnp.inf))
+    # turning rate, which changes sign there without a root. Where no bracket is, one
+    # admissible at one end: a root next to which a force passes through zero (a pair's end
+    # starting from rest at its cone's edge while the other end's normal force is small),
+    # told from a pole once refined (`rooted`)
+    good = bracket & admissible & nxt_ok
+    one_end = ~jnp.any(good)
+    chosen = jnp.where(one_end, bracket & (admissible | nxt_ok), good)
+    best = jnp.argmax(jnp.where(chosen, jnp.maximum(along, along_nxt), -jnp.inf))
 
     def regula_falsi(_, bracket):  # kept inside the bracket; each end: (angle, at(angle))
         lo, hi = bracket
@@ -88,8 +95,13 @@ def scan_direction(measure, n, t1, t2, dtype, slack):
         ),
     )
     # the end nearer the root, with what was measured there
-    phi, _, along_root, admissible_root = tree_where(jnp.abs(lo[1]) < jnp.abs(hi[1]), lo, hi)
-    found = jnp.any(good) & (along_root >= -slack) & admissible_root
+    phi, turn_root, along_root, admissible_root = tree_where(
+        jnp.abs(lo[1]) < jnp.abs(hi[1]), lo, hi
+    )
+    # refined, a root's turning rate falls far below its bracket's ends'; next to a pole it
+    # only grows (as 1 / distance)
+    rooted = jnp.abs(turn_root) <= ROOTED * jnp.minimum(jnp.abs(turn[best]), jnp.abs(nxt[best]))
+    found = jnp.any(chosen) & (along_root >= -slack) & admissible_root & (rooted | ~one_end)
     return jnp.cos(phi) * t1 + jnp.sin(phi) * t2, found
 
 
@@ -444,8 +456,9 @@ def exclusions(table, candidates, model, old, trigger, zero_slip):
     """Masks of the `candidates` that the event which ended the segment rules out (they would
     re-enter the boundary just crossed; `trigger` indexes the condition vector, -1: none),
     and of those among them that a stopped slip readmits where no candidate fits (a pair's
-    end that lifted off rules out the pair's modes only while the other end still slides;
-    `zero_slip`: (P,) points whose slip is below slip_stop)."""
+    end that lifted off, or whose sticking friction reached its cone, rules out the pair's
+    modes only while the other end still slides; `zero_slip`: (P,) points whose slip is
+    below slip_stop)."""
     P = model.num_points
     old_active = active_points(model, old)
     t_active = jnp.asarray(table.active)[candidates]
@@ -486,7 +499,10 @@ def exclusions(table, candidates, model, old, trigger, zero_slip):
         [ex_normal_a, ex_normal_b, ex_cone_a, ex_cone_b, ex_axial, ex_cop],
         jnp.zeros(candidates.shape, bool),
     )
-    other_end_stopped = ((k == NORMAL_A) & slid_to_rest[1]) | ((k == NORMAL_B) & slid_to_rest[0])
+    # (and the same where a sticking end's friction reached its cone: the modes of the pair
+    # with the other end sticking or sliding from rest need another friction there)
+    at_a, at_b = (k == NORMAL_A) | (k == CONE_A), (k == NORMAL_B) | (k == CONE_B)
+    other_end_stopped = (at_a & slid_to_rest[1]) | (at_b & slid_to_rest[0])
     return excluded, excluded & same_pair & other_end_stopped
 
 
@@ -505,12 +521,11 @@ def select_mode(
         return _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live)
 
     t_active = jnp.asarray(table.active)[candidates]
-    admissible = jnp.all(~t_active | resting, axis=1)
+    held_resting = jnp.all(~t_active | resting, axis=1)  # every point it holds rests
     # where no candidate fits, those a stopped slip readmits (`exclusions`) are tried
     excluded, readmitted = exclusions(table, candidates, model, old, trigger, zero_slip)
-    relaxed = admissible & (~excluded | readmitted)
-    held_resting = admissible
-    admissible = admissible & ~excluded
+    relaxed = held_resting & (~excluded | readmitted)
+    admissible = held_resting & ~excluded
 
     # a chunk of candidates at a time (under vmap side by side), in the table's order, until
     # one holds a consistent candidate with no rival (the Painlevé paradox's, below): the
@@ -546,11 +561,11 @@ def select_mode(
     start = (jnp.zeros((), chunks.dtype), jnp.array(False), tested, jnp.zeros(len(by_chunk), bool))
     _, _, tested, was_tested = jax.lax.while_loop(more, test_chunk, start)
     modes, margins, still, paradox = jax.tree.map(lambda x: x.reshape((-1,) + x.shape[2:]), tested)
-    admissible = admissible & jnp.repeat(was_tested, size)
-    admissible, violation, ok, plain = verdict(admissible, margins, still, paradox)
+    was_tested = jnp.repeat(was_tested, size)  # per candidate
+    admissible, violation, ok, plain = verdict(admissible & was_tested, margins, still, paradox)
     # no candidate fits: the loop tested every chunk, and the narrower exclusions may leave
     # one that does
-    relaxed = verdict(relaxed & jnp.repeat(was_tested, size), margins, still, paradox)
+    relaxed = verdict(relaxed & was_tested, margins, still, paradox)
     use_relaxed = ~jnp.any(ok) & jnp.any(relaxed[2])
     admissible, violation, ok, plain = jax.tree.map(
         lambda r, s: jnp.where(use_relaxed, r, s), relaxed, (admissible, violation, ok, plain)
@@ -562,7 +577,7 @@ def select_mode(
     # (with no consistent mode, whatever the event excluded: the forces of a sliding mode
     # whose normal problem turns singular pass through a pole, which the event function
     # takes for a force reaching zero)
-    painleve = ~any_ok & jnp.any(held_resting & jnp.repeat(was_tested, size) & still & paradox)
+    painleve = ~any_ok & jnp.any(held_resting & was_tested & still & paradox)
     paradox = admissible & paradox
     ambiguous = any_ok & jnp.any(ok & paradox) & jnp.any(plain)
     # the first in the table's order of preference
