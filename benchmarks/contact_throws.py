@@ -162,6 +162,16 @@ def throws(n, seed, uniform_attitude=False):
     return state, u(k[5], 0.2, 0.8), u(k[6], *THROW_FRICTION)
 
 
+def floor_friction(kind, friction):
+    """The floors' friction coefficients of throws of `kind` for the `friction` of `throws`
+    (uniform in THROW_FRICTION): mapped linearly onto the kind's own range (`FRICTION`)."""
+    if kind not in FRICTION:
+        return friction
+    lo, hi = FRICTION[kind]
+    low, high = THROW_FRICTION
+    return lo + (friction - low) * (hi - lo) / (high - low)
+
+
 def run(kind, n, seed, chunk, rtol, max_impacts, members=None):
     """Simulate n throws of `kind` (or only the throws `members` of them) in chunks of
     `chunk` bodies (one compilation; progress printed per chunk). Returns the outputs, the
@@ -184,11 +194,8 @@ def run(kind, n, seed, chunk, rtol, max_impacts, members=None):
         )
         return tr, lowest, jaxrb.energy(scene, tr.states)
 
-    args = throws(n, seed)
-    if kind in FRICTION:
-        lo, hi = FRICTION[kind]
-        low, high = THROW_FRICTION
-        args = (*args[:2], lo + (args[2] - low) * (hi - lo) / (high - low))
+    state, restitution, friction = throws(n, seed)
+    args = (state, restitution, floor_friction(kind, friction))
     if members is not None:
         args = jax.tree.map(lambda x: x[np.asarray(members)], args)
         n = len(members)

@@ -17,7 +17,7 @@ from turning_states import (
 )
 
 import jaxrb
-from benchmarks.contact_throws import shape_of, throws
+from benchmarks.contact_throws import floor_friction, shape_of, throws
 from benchmarks.face_vertex_lcp import vertex_kinematics, vertex_problem
 from jaxrb.contact._events import (
     CONE_A,
@@ -777,6 +777,62 @@ def test_an_edge_end_reaching_its_cone_beside_a_light_end_slides_on_from_rest():
     f, _, slip_acc, _ = _vertex_at_rest(scene, state, corners, (6, 18), 18, start)
     np.testing.assert_allclose(f, f_stick, rtol=1e-6)
     assert np.linalg.norm(slip_acc) < 1e-5  # m/s^2, against 9.81 m/s^2 of gravity
+    used = np.abs(np.asarray(margins)) < 1e29
+    assert np.all(np.asarray(margins)[used] >= -1e-12), margins
+
+
+# bar 34 of `contact_throws --n 400 --shapes bar --seed 2` at 0.6786100614604008 s, as the
+# event there left it: on a long edge (its points 0 and 2) sliding at 0.16 m/s while turning
+# at 13 rad/s about it, end 0 sticking and end 2 sliding at 2 cm/s, end 0's friction had
+# reached the cone
+CONE_EDGE_OF_A_TURNING_BAR = (
+    (0.1486860525822549, 0.10926079120916281, 0.004019143856509701),
+    (-0.675678435108257, 0.0005881891159674067, 0.0005391058478592715, 0.7371960497236171),
+    (0.025341359731869406, -0.044079857259594755, -0.15340717226789152),
+    (0.0038686523659470914, 12.79075090312675, 2.4243507308753314),
+)
+
+
+def test_an_edge_end_whose_slip_accelerates_in_a_narrow_fan_of_directions_starts_in_it():
+    """Bar 34 of the seed-2 throws turned about a long edge, end 0 sticking and end 2
+    sliding, until end 0's friction reached the cone. End 0 then slides from rest opposite
+    to that friction, where its slip starts with no acceleration; but its slip accelerates
+    only within a fan of directions narrower than the scan's step (2 pi / 64): at both ends
+    of the scan's bracket of that root the slip decelerates, and a bracket counted only
+    where it accelerated at an end. No root, and the candidate's fixed point ran to a
+    direction whose slip decelerates at 2.9 m/s^2: 15 events without a consistent mode,
+    end 0 chattering between sticking and sliding every 1.1e-6 s. A bracket now counts
+    where its slip's acceleration along the direction may reach zero within it (its ends'
+    less step^2 / 8 of the largest slip acceleration scanned). Checked against the edge's
+    contact problem solved in numpy (`_vertex_at_rest`)."""
+    _, restitution, friction = throws(400, 2)
+    e, mu = restitution[34], floor_friction("bar", friction[34])
+    scene = _throw_scene("bar", e, mu)
+    state = jaxrb.State(*map(jnp.asarray, CONE_EDGE_OF_A_TURNING_BAR))
+    old = _ended_pair(0, 2, [True, False])
+    trigger = jnp.array(len(contact_model(scene.body.shape).corners) + CONE_A)
+    chosen, margins = _die_choice(0.6786100614604008, state, e, mu, old, trigger, "bar")[:2]
+    corners = np.asarray(contact_model(scene.body.shape).corners)
+    # the edge sticking at 0 in numpy: its friction on the cone's edge
+    f_stick, F_stick, _, _ = _vertex_at_rest(scene, state, corners, (0, 2), 0)
+    np.testing.assert_allclose(np.linalg.norm(F_stick), float(mu) * f_stick[0], rtol=1e-9)
+    start = -F_stick / np.linalg.norm(F_stick)
+
+    def slip_along(angle):  # end 0 sliding from rest along `start` turned by `angle` (rad)
+        c, s = np.cos(angle), np.sin(angle)
+        turned = np.array([c * start[0] - s * start[1], s * start[0] + c * start[1], 0.0])
+        return _vertex_at_rest(scene, state, corners, (0, 2), 0, turned)[2] @ turned
+
+    # the fan of directions in which the slip accelerates, about 0.084 rad wide (from the
+    # start direction on), is narrower than the scan's step of 0.098 rad
+    assert abs(slip_along(0.0)) < 1e-12  # m/s^2
+    assert slip_along(-0.005) < 0 < slip_along(0.04) and slip_along(0.09) < 0
+    assert bool(chosen.consistent)
+    mode = chosen.mode
+    assert (int(mode.kind), int(mode.a), int(mode.b)) == (PAIR, 0, 2)
+    assert np.asarray(mode.stick).tolist() == [False, False]
+    assert np.asarray(mode.from_rest).tolist() == [True, False]
+    np.testing.assert_allclose(np.asarray(mode.slide_dir[0]), start, atol=1e-5)
     used = np.abs(np.asarray(margins)) < 1e29
     assert np.all(np.asarray(margins)[used] >= -1e-12), margins
 

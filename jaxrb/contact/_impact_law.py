@@ -22,7 +22,9 @@ directions) is solved exactly (a minimum-norm solve of its equalities, as the fo
 a face are redundant) and kept if it satisfies every condition (the polishes after one that
 is exact to roundoff are not tried). Where the pattern is not unique (a face sliding on four
 corners: the normal impulses split in many ways) the polish may fail and the Gauss-Seidel
-solution, which satisfies the conditions to its convergence, is kept.
+solution, which satisfies the conditions to its convergence, is kept. Where nothing fits,
+patterns of slots pushing are polished in turn, and a lone sliding slot's direction is
+found by scanning the circle of directions of its slip after (`_lone_slide`).
 
 Four variants (`solve_variant` solves one, `solve_impacts` all four; the event map solves
 each only where it uses it): Newton-Coulomb; the frictionless impulse, used where the
@@ -47,6 +49,7 @@ from .._linalg import inverse3, solve as small_solve
 from .._quaternion import _safe_norm
 from .._state import State
 from ._modes import cross
+from ._select import scan_direction
 
 SLOTS = 4
 SWEEPS = 1000  # most impacts settle in a few; a face sliding on four corners with strong
@@ -246,6 +249,36 @@ def _violation(W, c, target, present, mu, bilateral, lam):
     return jnp.max(jnp.where(present[None, :], bad, 0.0))
 
 
+def _lone_slide(W, c, target, present, mu, slack):
+    """The impulses (S, 3) of a lone present slot sliding through the impact, in its frame
+    (normal, t1, t2): Lambda_n (1, -mu s), s the unit slip after the impact, found by
+    scanning the circle of directions s (`scan_direction`) for a slip after c+_t = kappa s,
+    kappa >= -`slack` (m/s), with Lambda_n >= 0 meeting the slot's target; and whether one
+    was found. The slip's direction may turn so far in the impact that following it from
+    the slip before cycles (a corner landing with `mu` 1.2 as it spins at 61 rad/s). No
+    derivative flows here (the polish from this start carries them)."""
+    W, c, target, mu = jax.lax.stop_gradient((W, c, target, mu))
+    i = jnp.argmax(present)
+    Wi, ci = W[i, :, i, :], c[i]  # (3, 3), (3,): normal, t1, t2
+    dtype = c.dtype
+    n, t1, t2 = jnp.eye(3, dtype=dtype)  # the slot's frame in its own coordinates
+
+    def impulse(s):  # s: (0, s_t1, s_t2)
+        b = n - mu[i] * s  # Lambda = Lambda_n b
+        slope = Wi[0] @ b
+        normal = (target[i] - ci[0]) / jnp.where(slope != 0, slope, 1.0)
+        return normal * b, slope > 0
+
+    def measure(s):  # the slip after (its tangential velocity), whether the slot pushes
+        lam, pushes = impulse(s)
+        after = ci + Wi @ lam
+        return after * (1.0 - n), pushes
+
+    s, found = scan_direction(measure, n, t1, t2, dtype, slack)
+    lam = jnp.where((jnp.arange(c.shape[0]) == i)[:, None], impulse(s)[0], 0.0)
+    return lam, found
+
+
 class ImpactProblem(eqx.Module):
     """An impact's touching points gathered into `SLOTS` slots: the body, the state before
     (unit quaternion), the rotation R (body to world) and angular velocity `w` (world,
@@ -347,25 +380,38 @@ def solve_variant(problem: ImpactProblem, e, mu, bilateral, tol) -> ImpactOutcom
     size = jnp.maximum(jnp.where(swept > 0, swept, jnp.max(alone)), tiny)
     edge = size * jnp.concatenate([jnp.ones((c.shape[0], 1), dtype), -mu[:, None] * away], axis=1)
 
+    # and where a lone slot slides and nothing fits, its sliding direction from a scan of
+    # the circle of directions of its slip after (`_lone_slide`), polished in turn
+    lone = jnp.sum(present) == 1
+
     def polish(carry, item):  # carry: (an exact polish found, a polish that fits found)
         done, fitted = carry
-        margin, pattern, own = item  # own: Gauss-Seidel's pattern, else `pattern`'s
-        start = jnp.where(own, lam, jnp.where((pattern & present)[:, None], edge, 0.0))
+        # own: Gauss-Seidel's pattern; scanned: the lone slot's slide; else `pattern`'s
+        margin, pattern, own, scanned = item
+        plain = jnp.where(own, lam, jnp.where((pattern & present)[:, None], edge, 0.0))
 
         def tried():
+            start, found = jax.lax.cond(
+                scanned,
+                lambda: _lone_slide(W, c, target, present, mu, tol.velocity),
+                lambda: (plain, jnp.array(True)),
+            )
             polished = _polish(W, c, target, present, mu, bilateral, start, margin, exact)
-            return polished, violation(polished)
+            return polished, jnp.where(found, violation(polished), jnp.inf)
 
         untried = lambda: (jnp.zeros_like(lam), jnp.array(jnp.inf, dtype))  # noqa: E731
-        skip = done | (~own & (fitted | ~jnp.any(pattern & present)))
+        unneeded = jnp.where(scanned, ~lone, ~jnp.any(pattern & present))
+        skip = done | (~own & (fitted | unneeded))
         polished, error = jax.lax.cond(skip, untried, tried)
         return (done | (error <= exact), fitted | fits(error)), (polished, error)
 
     patterns = POLISH_PATTERNS[: len(POLISH_PATTERNS) if c.shape[0] == SLOTS else 0]
+    margins, others = len(POLISH_MARGINS), len(patterns) + 1
     items = (
-        jnp.array(POLISH_MARGINS + (POLISH_MARGINS[0],) * len(patterns), dtype),
-        jnp.array([[False] * c.shape[0]] * len(POLISH_MARGINS) + patterns, bool),
-        jnp.array([True] * len(POLISH_MARGINS) + [False] * len(patterns)),
+        jnp.array(POLISH_MARGINS + (POLISH_MARGINS[0],) * others, dtype),
+        jnp.array([[False] * c.shape[0]] * margins + patterns + [[False] * c.shape[0]], bool),
+        jnp.array([True] * margins + [False] * others),
+        jnp.array([False] * (margins + len(patterns)) + [True]),
     )
     swept_error = violation(lam)
     start = (jnp.array(False), fits(swept_error))

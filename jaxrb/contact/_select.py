@@ -52,7 +52,9 @@ def scan_direction(measure, n, t1, t2, dtype, slack):
     circle of directions is scanned, the bracket of a root of (a_t x s) . n with the fastest
     admissible slip acceleration along s is refined by regula falsi. A root counts where
     a_t . s >= -`slack` (m/s^2): at the friction cone's edge the slip starts with no
-    acceleration at all, and the sign of a_t . s there is roundoff's. Returns (s, found)."""
+    acceleration at all, and the sign of a_t . s there is roundoff's. Returns (s, found).
+    (The impact law finds a lone sliding point's slip after the impact the same way, a_t
+    then that slip, m/s.)"""
     step = 2 * jnp.pi / DIRECTIONS
 
     def at(phi):
@@ -64,7 +66,11 @@ def scan_direction(measure, n, t1, t2, dtype, slack):
     turn, along, admissible = jax.vmap(at)(angle)
     nxt, along_nxt, nxt_ok = jnp.roll(turn, -1), jnp.roll(along, -1), jnp.roll(admissible, -1)
     bracket = ((turn <= 0) & (nxt > 0)) | ((turn >= 0) & (nxt < 0))
-    bracket = bracket & (jnp.maximum(along, along_nxt) >= 0)
+    # a_t . s may rise above its ends' within a bracket: by at most step^2 / 8 times its
+    # second derivative, bounded by the largest |a_t| (as a sinusoid's by its amplitude).
+    # Near the cone's edge a_t . s is small at the root and its ends may both be below zero
+    reach = step**2 / 8 * jnp.max(jnp.sqrt(turn**2 + along**2))
+    bracket = bracket & (jnp.maximum(along, along_nxt) >= -reach)
     # admissible at both ends: where the forces change sign within a bracket they may pass
     # through a pole (the contact problem singular for some direction), and so does the
     # turning rate, which changes sign there without a root. Where no bracket is, one
