@@ -692,17 +692,22 @@ def _ended_pair(a, b, stick):
     )
 
 
-def _d12_event(seed, member, state, old, condition, t):
-    """`_die_choice` for the d12 `member` of `throws(1000 if seed else 300, seed)` at time
-    `t` (s) and `state` (position, quaternion, velocity, omega: body), after the force
-    condition `condition` (`_events.py`) of `old` ended a segment; and the throw's scene
-    and state."""
-    _, restitution, friction = throws(1000 if seed else 300, seed)
-    scene = _throw_scene("d12", restitution[member], friction[member])
+def _throw_event(kind, n, seed, member, state, old, condition, t):
+    """`_die_choice` for the throw `member` of `kind` in `throws(n, seed)` (its floor's
+    friction mapped as `contact_throws` maps it) at time `t` (s) and `state` (position,
+    quaternion, velocity, omega: body), after the force condition `condition`
+    (`_events.py`) of `old` ended a segment; and the throw's scene and state."""
+    _, restitution, friction = throws(n, seed)
+    e, mu = restitution[member], floor_friction(kind, friction[member])
+    scene = _throw_scene(kind, e, mu)
     state = jaxrb.State(*map(jnp.asarray, state))
     trigger = jnp.array(len(contact_model(scene.body.shape).corners) + condition)
-    e, mu = restitution[member], friction[member]
-    return _die_choice(t, state, e, mu, old, trigger), scene, state
+    return _die_choice(t, state, e, mu, old, trigger, kind), scene, state
+
+
+def _d12_event(seed, member, state, old, condition, t):
+    """`_throw_event` for the d12 `member` of `throws(1000 if seed else 300, seed)`."""
+    return _throw_event("d12", 1000 if seed else 300, seed, member, state, old, condition, t)
 
 
 def test_a_pivoting_edge_whose_sticking_end_reaches_the_cone_slides_on_from_rest():
@@ -805,13 +810,13 @@ def test_an_edge_end_whose_slip_accelerates_in_a_narrow_fan_of_directions_starts
     where its slip's acceleration along the direction may reach zero within it (its ends'
     less step^2 / 8 of the largest slip acceleration scanned). Checked against the edge's
     contact problem solved in numpy (`_vertex_at_rest`)."""
-    _, restitution, friction = throws(400, 2)
-    e, mu = restitution[34], floor_friction("bar", friction[34])
-    scene = _throw_scene("bar", e, mu)
-    state = jaxrb.State(*map(jnp.asarray, CONE_EDGE_OF_A_TURNING_BAR))
     old = _ended_pair(0, 2, [True, False])
-    trigger = jnp.array(len(contact_model(scene.body.shape).corners) + CONE_A)
-    chosen, margins = _die_choice(0.6786100614604008, state, e, mu, old, trigger, "bar")[:2]
+    t = 0.6786100614604008
+    choice, scene, state = _throw_event(
+        "bar", 400, 2, 34, CONE_EDGE_OF_A_TURNING_BAR, old, CONE_A, t
+    )
+    chosen, margins = choice[:2]
+    mu = scene.floor.friction
     corners = np.asarray(contact_model(scene.body.shape).corners)
     # the edge sticking at 0 in numpy: its friction on the cone's edge
     f_stick, F_stick, _, _ = _vertex_at_rest(scene, state, corners, (0, 2), 0)
