@@ -203,6 +203,30 @@ def test_the_root_finder_returns_the_conditions_at_the_root():
         assert int(jnp.argmin(sol.aux)) == 0
 
 
+def test_the_root_is_the_zero_of_the_condition_that_falls_not_of_the_least_at_the_start():
+    """Where the condition least at the final bracket's lower end is not the one that falls
+    to zero in it (a constant 1e-7 beside a condition falling at 1e6 per second, which
+    crosses it 1e-13 s before its zero), the root is the falling condition's zero to
+    roundoff: a line through the least's values at the two ends would put it up to 1e-12 s
+    early, where the falling condition is still up to 1e-6 (the event's state would not yet
+    be past the boundary that ended the segment)."""
+
+    def fn(t, _):
+        values = jnp.stack([jnp.asarray(1e-7) + 0.0 * t, 1e6 * (0.3 - t)])
+        return jnp.min(values), values
+
+    for lower, upper in ((0.0, 1.0), (0.29, 0.3 + 1e-3), (0.3 - 3e-12, 0.3 + 7e-12)):
+        sol = optx.root_find(
+            fn, ROOT, upper, options=dict(lower=lower, upper=upper), has_aux=True, throw=False
+        )
+        final = sol.state
+        # the final bracket's least at its lower end is the constant (the case in question)
+        assert float(final.f_lower) == 1e-7
+        np.testing.assert_allclose(float(sol.value), 0.3, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(np.asarray(sol.aux), [1e-7, 0.0], rtol=0, atol=1e-9)
+        assert int(jnp.argmin(sol.aux)) == 1
+
+
 def test_the_event_time_and_state_are_differentiable():
     """The event time and the state there, found on the last step, differentiate through the
     root (implicit function theorem) and the step's dense output: their derivatives with

@@ -5,11 +5,12 @@ diffrax stops a segment at the end of that step (`_step_end.py`); `event_root` f
 first zero of the event function c (the least shifted condition) on the step's dense output
 with `EventTime`, which also returns the conditions at the root: linearly interpolated
 between the final bracket's ends (at most the time tolerance apart), or evaluated there
-where the bracket closed with one end unknown. The condition that ended the segment is the
-least of them at the root (the least at an end of the bracket may be another: two
-conditions that reach zero within the tolerance of each other, as a coin's rim comes down
-flat while its slip starts). The state at the root is interpolated; the mode is not solved
-there again. The event time is differentiable: optimistix's implicit function theorem at
+where the bracket closed with one end unknown. The root is the first zero of the
+conditions' lines through the final bracket's ends, and the condition that ended the
+segment the least of them at the root (the least at an end of the bracket may be another:
+two conditions that reach zero within the tolerance of each other, as a coin's rim comes
+down flat while its slip starts). The state at the root is interpolated; the mode is not
+solved there again. The event time is differentiable: optimistix's implicit function theorem at
 the root (dt/dp = -(dc/dp) / (dc/dt)), as in diffrax's own event handling.
 """
 
@@ -34,9 +35,10 @@ def event_root(step, conditions, args, happened, root_finder):
     lower, upper = step.t0, step.t1
     dtype = jnp.result_type(upper)
 
-    def fn(t, _):
+    def fn(t, _):  # (no event: every condition replaced by the time left in the step)
         values = conditions(t, step.evaluate(t), args).astype(dtype)
-        return jnp.where(happened, jnp.min(values), upper - t), values
+        values = jnp.where(happened, values, upper - t)
+        return jnp.min(values), values
 
     def find():
         sol = optx.root_find(
@@ -74,9 +76,13 @@ class _EventTimeState(eqx.Module):
 
 class EventTime(optx.AbstractRootFinder):
     """The event time in the bracket [lower, upper] (the step in which the condition fell
-    to zero or below): regula falsi with the Illinois modification, safeguarded by
-    bisection, until the bracket is below the time tolerance atol + rtol |t|; the time
-    returned is the root of the line through the final bracket's ends.
+    to zero or below) of a function returning the least of several conditions and, as its
+    auxiliary output, the vector of them: regula falsi with the Illinois modification,
+    safeguarded by bisection, until the bracket is below the time tolerance atol + rtol |t|;
+    the time returned is the first zero of the conditions' lines through the final
+    bracket's ends. (Where the condition least at the lower end is not the one that falls
+    to zero, the line through the least's values at the two ends has its zero where the
+    falling condition is still positive, by up to its rate times the tolerance.)
 
     The condition is positive at `lower` and at most zero at `upper` (it fires on a
     down-crossing only, so no sign is detected). The bracket halves while an end's value is
@@ -178,7 +184,10 @@ class EventTime(optx.AbstractRootFinder):
         del fn, y, aux, args, options, tags, result
         lower, upper = state.lower, state.upper
         known = jnp.isfinite(state.f_lower) & jnp.isfinite(state.f_upper)
-        root = jnp.clip(_line_root(lower, upper, state.f_lower, state.f_upper), lower, upper)
+        # each condition that fell to zero or below in the bracket: the zero of its line
+        crossed = state.aux_upper <= 0
+        zeros = _line_root(lower, upper, state.aux_lower, state.aux_upper)
+        root = jnp.clip(jnp.min(jnp.where(crossed, zeros, upper)), lower, upper)
         root = jnp.where(known, root, lower + 0.5 * (upper - lower))
         width = upper - lower
         share = jnp.where(width > 0, (root - lower) / jnp.where(width > 0, width, 1.0), 1.0)
