@@ -536,7 +536,8 @@ def _choices(which, states, friction):
             )
         )(every)
         admissible = jnp.all(~jnp.asarray(table.active) | resting, axis=1) & still
-        admissible = admissible & ~exclusions(table, every, model, old, trigger, zero_slip)[0]
+        excluded = exclusions(table, every, model, old, trigger, zero_slip, resting)[0]
+        admissible = admissible & ~excluded
         violation = jnp.max(jnp.maximum(-margins, 0.0), axis=1)
         ok = admissible & (violation <= TOL.force)
         plain = ok & ~paradox
@@ -546,6 +547,45 @@ def _choices(which, states, friction):
         return chosen.mode, chosen.consistent, reference, jnp.any(ok), jnp.sum(resting)
 
     return jax.vmap(one)(states, friction)
+
+
+def test_a_lift_off_readmits_the_modes_of_a_point_that_came_down_with_it():
+    """An edge of a d12 sliding on both ends, whose end b's normal force reached zero as a
+    third corner came down onto the floor (within the event's tolerance: a root that
+    another condition's zero lies beside): the modes holding b are excluded, since they
+    would re-enter the boundary just crossed; but those that also hold the new corner are
+    another contact, whose forces the event did not test, and are readmitted where no
+    candidate fits (two d12s of `test_d12_turning_flat_with_high_friction_comes_to_rest`
+    had no consistent mode without it). The ended pair itself stays excluded."""
+    from jaxrb.contact._select import exclusions
+
+    model = contact_model(jaxrb.dice.d12().shape)
+    table = CandidateTable(model)
+    P = model.num_points
+    every = jnp.arange(len(table))
+    kind, active = np.asarray(table.kind), np.asarray(table.active)
+    pair = int(np.flatnonzero(kind == PAIR)[0])
+    old = table.mode(pair, flight_mode(jnp.float64))
+    a, b = int(table.a[pair]), int(table.b[pair])
+    # a corner of a face through the edge, other than its ends
+    face = next(f for f in model.face_points if a in f and b in f)
+    c = next(int(v) for v in face if v not in (a, b))
+    resting = np.zeros(P, bool)
+    resting[[a, b, c]] = True
+    zero_slip = jnp.zeros(P, bool)  # both ends still slide
+    trigger = jnp.array(P + 1)  # NORMAL_B
+    excluded, readmitted = map(
+        np.asarray,
+        exclusions(table, every, model, old, trigger, zero_slip, jnp.asarray(resting)),
+    )
+    holds_b, holds_c = active[:, b], active[:, c]
+    np.testing.assert_array_equal(excluded, holds_b)
+    np.testing.assert_array_equal(readmitted, holds_b & holds_c)
+    assert np.any(readmitted) and not readmitted[pair]
+    # without the new corner at rest nothing is readmitted (both ends slide)
+    resting[c] = False
+    _, readmitted = exclusions(table, every, model, old, trigger, zero_slip, jnp.asarray(resting))
+    assert not np.any(np.asarray(readmitted))
 
 
 def test_mode_choice_equals_testing_every_mode():

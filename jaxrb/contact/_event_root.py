@@ -82,7 +82,8 @@ class EventTime(optx.AbstractRootFinder):
     the time returned is the first zero of the conditions' lines through the final
     bracket's ends. (Where the condition least at the lower end is not the one that falls
     to zero, the line through the least's values at the two ends has its zero where the
-    falling condition is still positive, by up to its rate times the tolerance.)
+    falling condition is still positive, by up to its rate times the tolerance.) A function
+    without auxiliary output (diffrax's own events): the zero of its own line.
 
     The condition is positive at `lower` and at most zero at `upper` (it fires on a
     down-crossing only, so no sign is detected). The bracket halves while an end's value is
@@ -184,10 +185,13 @@ class EventTime(optx.AbstractRootFinder):
         del fn, y, aux, args, options, tags, result
         lower, upper = state.lower, state.upper
         known = jnp.isfinite(state.f_lower) & jnp.isfinite(state.f_upper)
-        # each condition that fell to zero or below in the bracket: the zero of its line
-        crossed = state.aux_upper <= 0
-        zeros = _line_root(lower, upper, state.aux_lower, state.aux_upper)
-        root = jnp.clip(jnp.min(jnp.where(crossed, zeros, upper)), lower, upper)
+        # each condition that fell to zero or below in the bracket: the zero of its line (a
+        # function without auxiliary output, as diffrax's own events call it: its own line)
+        lone = state.aux_lower is None
+        c_lower = state.f_lower[None] if lone else state.aux_lower
+        c_upper = state.f_upper[None] if lone else state.aux_upper
+        zeros = _line_root(lower, upper, c_lower, c_upper)
+        root = jnp.clip(jnp.min(jnp.where(c_upper <= 0, zeros, upper)), lower, upper)
         root = jnp.where(known, root, lower + 0.5 * (upper - lower))
         width = upper - lower
         share = jnp.where(width > 0, (root - lower) / jnp.where(width > 0, width, 1.0), 1.0)

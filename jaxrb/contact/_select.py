@@ -458,13 +458,15 @@ def _pair_directions(geom, mode, hats0, rests, scanned, live, solve, relative, d
     return hats0, exact_a, exact_b, exact_pair
 
 
-def exclusions(table, candidates, model, old, trigger, zero_slip):
+def exclusions(table, candidates, model, old, trigger, zero_slip, resting):
     """Masks of the `candidates` that the event which ended the segment rules out (they would
     re-enter the boundary just crossed; `trigger` indexes the condition vector, -1: none),
-    and of those among them that a stopped slip readmits where no candidate fits (a pair's
-    end that lifted off, or whose sticking friction reached its cone, rules out the pair's
-    modes only while the other end still slides; `zero_slip`: (P,) points whose slip is
-    below slip_stop)."""
+    and of those among them that are readmitted where no candidate fits: a pair's end that
+    lifted off, or whose sticking friction reached its cone, rules out the pair's modes only
+    while the other end still slides (`zero_slip`: (P,) points whose slip is below
+    slip_stop); and a mode that also holds a point the ended mode did not hold, resting
+    (`resting`, (P,)) as the event came, is another contact, whose forces the event has not
+    tested."""
     P = model.num_points
     old_active = active_points(model, old)
     t_active = jnp.asarray(table.active)[candidates]
@@ -509,7 +511,10 @@ def exclusions(table, candidates, model, old, trigger, zero_slip):
     # with the other end sticking or sliding from rest need another friction there)
     at_a, at_b = (k == NORMAL_A) | (k == CONE_A), (k == NORMAL_B) | (k == CONE_B)
     other_end_stopped = (at_a & slid_to_rest[1]) | (at_b & slid_to_rest[0])
-    return excluded, excluded & same_pair & other_end_stopped
+    # (a point that came down onto the floor as the boundary was reached: a gap that closed
+    # within the event's tolerance of it)
+    holds_new = jnp.any(t_active & resting & ~old_active, axis=1)
+    return excluded, excluded & ((same_pair & other_end_stopped) | holds_new)
 
 
 def select_mode(
@@ -529,7 +534,7 @@ def select_mode(
     t_active = jnp.asarray(table.active)[candidates]
     held_resting = jnp.all(~t_active | resting, axis=1)  # every point it holds rests
     # where no candidate fits, those a stopped slip readmits (`exclusions`) are tried
-    excluded, readmitted = exclusions(table, candidates, model, old, trigger, zero_slip)
+    excluded, readmitted = exclusions(table, candidates, model, old, trigger, zero_slip, resting)
     relaxed = held_resting & (~excluded | readmitted)
     admissible = held_resting & ~excluded
 
