@@ -921,6 +921,52 @@ def test_an_edge_end_reaching_its_cone_as_the_other_ends_slip_stops_sticks_at_bo
     assert np.all(np.asarray(margins)[used] > 1.0), margins
 
 
+# d12 91 of `throws(1000, 3)` rolling over an edge (18, 19) at 23.5 rad/s as end 19's
+# friction reached its cone (position, unit quaternion, velocity: world; omega: body)
+CONE_EDGE_BESIDE_A_SLIDE_FROM_REST = (
+    (-0.15021935145170304, -0.04616373936354901, 0.01029531609944909),
+    (-0.5898110343836004, -0.6275705161129269, -0.32581474384341613, 0.39002941391560586),
+    (-0.2403672662274005, 0.025426712115252353, -0.1344620414041397),
+    (-0.0002905623872756824, 0.00016164047727564154, 23.47736389845499),
+)
+
+
+def test_an_edge_end_reaching_its_cone_beside_an_end_just_started_from_rest_sticks_at_both():
+    """d12 91 of `throws(1000, 3)` rolled over an edge, end 18 sliding from rest (its slip
+    3e-6 m/s, below slip_stop) and end 19 sticking, until end 19's friction reached its
+    cone. The event ruled out every mode with end 19 sticking, and nothing else fitted (end
+    19 from rest: end 18's friction beyond its cone; both from rest: their slips would
+    decelerate); the least inconsistent mode was taken and 50 us later the edge chattered
+    to `max_events` (800 events in 1.5 us). With end 18 at rest, end 19's friction with
+    end 18 sticking is another friction, which the event has not tested (as where the other
+    end's slip had stopped): the edge sticks at both ends, every margin above 0.28 m/s^2."""
+    old = eqx.tree_at(
+        lambda m: (m.from_rest, m.slide_dir),
+        _ended_pair(18, 19, [False, True]),
+        (
+            jnp.array([True, False]),
+            jnp.array([[0.2874969912746546, 0.9577815408578415, 0.0], [0.0, 0.0, 0.0]]),
+        ),
+    )
+    t = 0.4709871473748404
+    choice, scene, _ = _throw_event(
+        "d12", 1000, 3, 91, CONE_EDGE_BESIDE_A_SLIDE_FROM_REST, old, CONE_B, t
+    )
+    chosen, margins, resting, _, friction, normal = choice
+    mu = scene.floor.friction
+    assert np.flatnonzero(np.asarray(resting)).tolist() == [18, 19]
+    # the event left end 19's friction on the cone's edge
+    np.testing.assert_allclose(
+        np.linalg.norm(np.asarray(friction[1])), float(mu) * float(normal[1]), rtol=1e-3
+    )
+    assert bool(chosen.consistent)
+    mode = chosen.mode
+    assert (int(mode.kind), int(mode.a), int(mode.b)) == (PAIR, 18, 19)
+    assert np.asarray(mode.stick).tolist() == [True, True]
+    used = np.abs(np.asarray(margins)) < 1e29
+    assert np.all(np.asarray(margins)[used] > 0.28), margins
+
+
 # d12s of `contact_throws --n 300` (seed 0) at an event as a vertex's slip stopped: the
 # member, the time (s), the state (position, unit quaternion, velocity in the world frame,
 # angular velocity in the body frame), the vertex the die slid on, its face's vertices

@@ -484,10 +484,11 @@ def exclusions(table, candidates, model, old, trigger, zero_slip, resting):
     )
     # a normal force reached zero: that point (a face: all its points) stops carrying, in
     # the mode that ended. Where the pair's other point slid and its slip is gone too (both
-    # boundaries reached within the event's tolerance), every mode of the pair is another
-    # mode (that point now sticks or slides from rest), whose normal force the event has
-    # not tested: those are readmitted
-    slid = (old.kind == PAIR) & ~old.stick & ~old.from_rest
+    # boundaries reached within the event's tolerance), or it slid from rest with its slip
+    # still below slip_stop, every mode of the pair is another mode (that point now sticks
+    # or slides from rest in another direction), whose normal force the event has not
+    # tested: those are readmitted
+    slid = (old.kind == PAIR) & ~old.stick
     slid_to_rest = slid & zero_slip[jnp.stack([old.a, old.b])]
     lifted_a = jnp.where(old_face, old_active, idx == old.a)
     ex_normal_a = jnp.any(t_active & lifted_a, axis=1)
