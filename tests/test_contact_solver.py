@@ -905,20 +905,28 @@ def test_an_edge_end_reaching_its_cone_as_the_other_ends_slip_stops_sticks_at_bo
     old = _ended_pair(7, 15, [True, False])
     t = 0.7764385324346504
     choice, scene, _ = _d12_event(1, 586, CONE_EDGE_OF_A_ROCKING_EDGE, old, CONE_A, t)
+    # (end 7's friction is 2.9e-4 beyond its cone solved again at the event's state: end
+    # 15's friction turns with its slip of 8.5e-6 m/s)
+    _assert_sticks_at_both(choice, scene, (7, 15), 0, 1.0)
+
+
+def _assert_sticks_at_both(choice, scene, edge, at_cone, least_margin):
+    """A choice at an event where the friction of end `at_cone` (0: a, 1: b) of the pair
+    `edge` reached its cone: both ends rest, that end's friction is on its cone (to 1e-3),
+    and the pair is chosen, consistent, sticking at both ends, every margin above
+    `least_margin` (m/s^2)."""
     chosen, margins, resting, _, friction, normal = choice
-    mu = scene.floor.friction
-    assert np.flatnonzero(np.asarray(resting)).tolist() == [7, 15]
-    # the event left end 7's friction on the cone's edge (2.9e-4 beyond it, solved again at
-    # the event's state: end 15's friction turns with its slip of 8.5e-6 m/s)
+    mu = float(scene.floor.friction)
+    assert np.flatnonzero(np.asarray(resting)).tolist() == list(edge)
     np.testing.assert_allclose(
-        np.linalg.norm(np.asarray(friction[0])), float(mu) * float(normal[0]), rtol=1e-3
+        np.linalg.norm(np.asarray(friction[at_cone])), mu * float(normal[at_cone]), rtol=1e-3
     )
     assert bool(chosen.consistent)
     mode = chosen.mode
-    assert (int(mode.kind), int(mode.a), int(mode.b)) == (PAIR, 7, 15)
+    assert (int(mode.kind), int(mode.a), int(mode.b)) == (PAIR, *edge)
     assert np.asarray(mode.stick).tolist() == [True, True]
     used = np.abs(np.asarray(margins)) < 1e29
-    assert np.all(np.asarray(margins)[used] > 1.0), margins
+    assert np.all(np.asarray(margins)[used] > least_margin), margins
 
 
 # d12 91 of `throws(1000, 3)` rolling over an edge (18, 19) at 23.5 rad/s as end 19's
@@ -952,19 +960,7 @@ def test_an_edge_end_reaching_its_cone_beside_an_end_just_started_from_rest_stic
     choice, scene, _ = _throw_event(
         "d12", 1000, 3, 91, CONE_EDGE_BESIDE_A_SLIDE_FROM_REST, old, CONE_B, t
     )
-    chosen, margins, resting, _, friction, normal = choice
-    mu = scene.floor.friction
-    assert np.flatnonzero(np.asarray(resting)).tolist() == [18, 19]
-    # the event left end 19's friction on the cone's edge
-    np.testing.assert_allclose(
-        np.linalg.norm(np.asarray(friction[1])), float(mu) * float(normal[1]), rtol=1e-3
-    )
-    assert bool(chosen.consistent)
-    mode = chosen.mode
-    assert (int(mode.kind), int(mode.a), int(mode.b)) == (PAIR, 18, 19)
-    assert np.asarray(mode.stick).tolist() == [True, True]
-    used = np.abs(np.asarray(margins)) < 1e29
-    assert np.all(np.asarray(margins)[used] > 0.28), margins
+    _assert_sticks_at_both(choice, scene, (18, 19), 1, 0.28)
 
 
 # d12s of `contact_throws --n 300` (seed 0) at an event as a vertex's slip stopped: the
