@@ -43,7 +43,7 @@ from jaxrb.contact._modes import (
     solve_mode,
 )
 from jaxrb.contact._resting import resting_points, touching_points
-from jaxrb.contact._select import relative_accelerations
+from jaxrb.contact._select import exclusions, relative_accelerations
 
 TOL = jaxrb.contact.ContactOptions().resolved(jnp.float64)
 
@@ -513,7 +513,7 @@ def _choices(which, states, friction):
     """The mode `select_mode` chooses (chunks in the table's order, stopping early) and the
     one chosen by testing every mode of the table, for resting states of
     `CHOICE_SHAPES[which]`."""
-    from jaxrb.contact._select import _candidate, exclusions, select_mode
+    from jaxrb.contact._select import _candidate, select_mode
 
     shape = CHOICE_SHAPES[which]
     model = contact_model(shape)
@@ -557,8 +557,6 @@ def test_a_lift_off_readmits_the_modes_of_a_point_that_came_down_with_it():
     another contact, whose forces the event did not test, and are readmitted where no
     candidate fits (two d12s of `test_d12_turning_flat_with_high_friction_comes_to_rest`
     had no consistent mode without it). The ended pair itself stays excluded."""
-    from jaxrb.contact._select import exclusions
-
     model = contact_model(jaxrb.dice.d12().shape)
     table = CandidateTable(model)
     P = model.num_points

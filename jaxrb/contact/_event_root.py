@@ -10,8 +10,8 @@ conditions' lines through the final bracket's ends, and the condition that ended
 segment the least of them at the root (the least at an end of the bracket may be another:
 two conditions that reach zero within the tolerance of each other, as a coin's rim comes
 down flat while its slip starts). The state at the root is interpolated; the mode is not
-solved there again. The event time is differentiable: optimistix's implicit function theorem at
-the root (dt/dp = -(dc/dp) / (dc/dt)), as in diffrax's own event handling.
+solved there again. The event time is differentiable: optimistix's implicit function
+theorem at the root (dt/dp = -(dc/dp) / (dc/dt)), as in diffrax's own event handling.
 """
 
 import dataclasses

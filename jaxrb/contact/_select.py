@@ -534,7 +534,7 @@ def select_mode(
 
     t_active = jnp.asarray(table.active)[candidates]
     held_resting = jnp.all(~t_active | resting, axis=1)  # every point it holds rests
-    # where no candidate fits, those a stopped slip readmits (`exclusions`) are tried
+    # where no candidate fits, those `exclusions` readmits are tried
     excluded, readmitted = exclusions(table, candidates, model, old, trigger, zero_slip, resting)
     relaxed = held_resting & (~excluded | readmitted)
     admissible = held_resting & ~excluded
