@@ -23,6 +23,7 @@ from jaxrb.contact._events import (
     CONE_A,
     CONE_B,
     COP,
+    NORMAL_B,
     NUM_FORCE_CONDITIONS,
     SLIP_A,
     condition_tolerances,
@@ -513,7 +514,7 @@ def _choices(which, states, friction):
     """The mode `select_mode` chooses (chunks in the table's order, stopping early) and the
     one chosen by testing every mode of the table, for resting states of
     `CHOICE_SHAPES[which]`."""
-    from jaxrb.contact._select import _candidate, select_mode
+    from jaxrb.contact._select import _candidate, continued_slides, select_mode
 
     shape = CHOICE_SHAPES[which]
     model = contact_model(shape)
@@ -530,11 +531,14 @@ def _choices(which, states, friction):
         chosen = select_mode(*args)
         # every mode of the table, the first consistent one with no rival taken
         every = jnp.arange(len(table))
-        modes, margins, still, paradox = jax.vmap(
-            lambda i: _candidate(
-                0.0, state, geom, table.mode(i, old), scene, model, TOL, resting, zero_slip, True
-            )
-        )(every)
+
+        def candidate(i):
+            mode = table.mode(i, old)
+            continued = continued_slides(mode, old, trigger, zero_slip)
+            args = (0.0, state, geom, mode, scene, model, TOL, resting, zero_slip, continued)
+            return _candidate(*args, True)
+
+        modes, margins, still, paradox = jax.vmap(candidate)(every)
         admissible = jnp.all(~jnp.asarray(table.active) | resting, axis=1) & still
         excluded = exclusions(table, every, model, old, trigger, zero_slip, resting)[0]
         admissible = admissible & ~excluded
@@ -624,7 +628,7 @@ def _choice_at_event(t, state, scene, old, trigger, slip_may_be_gone=True):
     after the event `trigger` ended the mode `old`; `slip_may_be_gone` (P,) masks which
     points may count as without slip. Returns the choice, the chosen mode's margins
     (m/s^2), the points resting and without slip, and the geometry."""
-    from jaxrb.contact._select import _candidate, select_mode
+    from jaxrb.contact._select import _candidate, continued_slides, select_mode
 
     model = contact_model(scene.body.shape)
     geom = geometry(state, scene, model, old.seed, old.side)
@@ -633,7 +637,9 @@ def _choice_at_event(t, state, scene, old, trigger, slip_may_be_gone=True):
     table = CandidateTable(model)
     args = (t, state, geom, old, trigger, scene, model, table, TOL, resting, zero_slip)
     chosen = select_mode(*args)
-    tested = _candidate(t, state, geom, chosen.mode, scene, model, TOL, resting, zero_slip, True)
+    continued = continued_slides(chosen.mode, old, trigger, zero_slip)
+    args = (t, state, geom, chosen.mode, scene, model, TOL, resting, zero_slip, continued)
+    tested = _candidate(*args, True)
     return chosen, tested[1], resting, zero_slip, geom
 
 
@@ -727,6 +733,16 @@ def _ended_pair(a, b, stick):
             jnp.array(b, jnp.int32),
             jnp.array(stick),
         ),
+    )
+
+
+def _ended_pair_from_rest(a, b, b_sticks, s0):
+    """`_ended_pair` with end a sliding from rest along `s0` (world, unit) and end b
+    sticking (`b_sticks`) or sliding."""
+    return eqx.tree_at(
+        lambda m: (m.from_rest, m.slide_dir),
+        _ended_pair(a, b, [False, b_sticks]),
+        (jnp.array([True, False]), jnp.array([s0, [0.0, 0.0, 0.0]])),
     )
 
 
@@ -946,19 +962,108 @@ def test_an_edge_end_reaching_its_cone_beside_an_end_just_started_from_rest_stic
     to `max_events` (800 events in 1.5 us). With end 18 at rest, end 19's friction with
     end 18 sticking is another friction, which the event has not tested (as where the other
     end's slip had stopped): the edge sticks at both ends, every margin above 0.28 m/s^2."""
-    old = eqx.tree_at(
-        lambda m: (m.from_rest, m.slide_dir),
-        _ended_pair(18, 19, [False, True]),
-        (
-            jnp.array([True, False]),
-            jnp.array([[0.2874969912746546, 0.9577815408578415, 0.0], [0.0, 0.0, 0.0]]),
-        ),
-    )
+    old = _ended_pair_from_rest(18, 19, True, [0.2874969912746546, 0.9577815408578415, 0.0])
     t = 0.4709871473748404
     choice, scene, _ = _throw_event(
         "d12", 1000, 3, 91, CONE_EDGE_BESIDE_A_SLIDE_FROM_REST, old, CONE_B, t
     )
     _assert_sticks_at_both(choice, scene, (18, 19), 1, 0.28)
+
+
+# d12 232 of `throws(1000, 3)` on an edge (3, 17), end 3 sliding from rest, as end 17's
+# load reached zero (position, unit quaternion, velocity: world; omega: body)
+LIFT_OFF_BESIDE_A_SLIDE_FROM_REST = (
+    (-0.16010287963693173, 0.019282564387342424, 0.010259758227114274),
+    (-0.12861161267264495, -0.8385020459750385, 0.4620139774165629, -0.25868215362803476),
+    (0.13198692015067787, -0.011021289296667713, -0.10212618701705087),
+    (-3.656735516930288, -14.485910520501697, -13.230137497851505),
+)
+
+
+def test_a_slide_from_rest_that_goes_on_past_an_event_keeps_its_friction():
+    """d12 232 of `throws(1000, 3)`: an edge (3, 17), end 3 sliding from rest (its slip
+    grown to 0.02 m/s, friction opposing unit(s + blend s0)) and end 17 sliding, until end
+    17's load reached zero. The candidates once took end 3's friction along its slip alone:
+    the pair then still loaded end 17 (+3.9e-5 m/s^2) and, end 3 alone, end 17 sank
+    (-4.3e-5 m/s^2), both off the boundary the event had found, and no mode fitted. End 3
+    goes on sliding, with the same friction law: the pair's load at end 17 and end 3
+    alone's gap acceleration at 17 meet at zero, and end 3 alone slides on, consistent."""
+    s0 = [-0.8167914656698835, -0.576933013103639, 0.0]
+    old = _ended_pair_from_rest(3, 17, False, s0)
+    t = 0.7077863576370632
+    choice, scene, _ = _throw_event(
+        "d12", 1000, 3, 232, LIFT_OFF_BESIDE_A_SLIDE_FROM_REST, old, NORMAL_B, t
+    )
+    chosen, margins, resting, _, _, normal = choice
+    assert np.flatnonzero(np.asarray(resting)).tolist() == [3, 17]
+    assert abs(float(normal[1])) < 1e-9 * float(scene.body.mass)  # the boundary (N)
+    assert bool(chosen.consistent)
+    mode = chosen.mode
+    assert (int(mode.kind), int(mode.a)) == (POINT, 3)
+    assert np.asarray(mode.stick).tolist() == [False, False]
+    assert bool(mode.from_rest[0])
+    np.testing.assert_array_equal(np.asarray(mode.slide_dir[0]), s0)
+    assert abs(float(margins[17])) < 1e-9  # end 17's gap acceleration (m/s^2): at zero
+
+
+# a d4 of `throws(300, 0)` (member 201's throw) rolling over an edge (1, 2) at 29.8 rad/s
+# as end 2's friction reached its cone (position, unit quaternion, velocity: world; omega:
+# body)
+CONE_BESIDE_A_SLIDE_TURNING_BACK = (
+    (-0.04713353696003685, -0.0039839011916432835, 0.004199763026903945),
+    (-0.8764365255838343, -0.20092847993097135, 0.3600877667509769, 0.24864344514074477),
+    (-0.12160591302217558, -0.028794972505833804, -0.14227062991794961),
+    (21.039575736807276, -21.04018212309196, -0.0003766189021162202),
+)
+
+
+def test_a_slide_from_rest_about_to_turn_back_keeps_its_friction_at_another_event():
+    """A d4 on an edge (1, 2), end 1 sliding from rest, its slip (1.03e-5 m/s, just above
+    slip_stop) turned almost against its start direction (its condition 1.4e-6 m/s, within
+    its tolerance of the turn back), end 2 sticking, until end 2's friction reached its
+    cone. End 1 can neither stick (its slip is not at rest) nor slide with its friction
+    along its slip alone (54 degrees from the blend's direction; then no mode fits):
+    it goes on with its own friction law, and end 2 starts from rest beside it."""
+    s0 = [0.552706778031427, -0.8333757960956862, 0.0]
+    old = _ended_pair_from_rest(1, 2, True, s0)
+    t = 0.20061716654675754
+    choice, _, _ = _throw_event("d4", 300, 0, 201, CONE_BESIDE_A_SLIDE_TURNING_BACK, old, CONE_B, t)
+    chosen, margins = choice[:2]
+    assert bool(chosen.consistent), margins
+    mode = chosen.mode
+    assert (int(mode.kind), int(mode.a), int(mode.b)) == (PAIR, 1, 2)
+    assert np.asarray(mode.stick).tolist() == [False, False]
+    assert np.asarray(mode.from_rest).tolist() == [True, True]
+    np.testing.assert_array_equal(np.asarray(mode.slide_dir[0]), s0)
+
+
+# a die of `throws(300, 0)` (member 165's throw) rolling over an edge (3, 7) at 23.7 rad/s
+# as end 7's friction reached its cone (position, unit quaternion, velocity: world; omega:
+# body)
+CONE_BESIDE_A_SLIDE_FROM_REST = (
+    (-0.014478228732194308, 0.020000568488706884, 0.009172546462247817),
+    (0.5021908266961115, -0.5897479054710711, -0.48152893567135346, 0.4100386148717853),
+    (0.21333508251874556, -0.04354448886864721, -0.15721291243624028),
+    (23.73734594741318, -0.00022554955081910042, -3.640544302222898e-05),
+)
+
+
+def test_a_slide_from_rest_that_no_event_ended_is_not_stopped_first():
+    """A die rolling over an edge (3, 7), end 3 sliding from rest (slip 3.7e-6 m/s, below
+    slip_stop) and end 7 sticking, until end 7's friction reached its cone. The first
+    consistent mode in the table's order stops end 3 and starts end 7 from rest; then end
+    3's friction reaches its cone 0.07 us later, and the ends took turns, each starting from
+    rest as the other stuck, up to `max_events` (817 events in 60 us). End 3's slide is not
+    what the event ended: a mode that sticks there is tried only where nothing else fits.
+    Nothing does (both ends from rest: their slips would decelerate; either end alone: the
+    other corner sinks), and the edge sticks at both ends, every margin above 0.48 m/s^2."""
+    s0 = [-0.3628851128666587, -0.9318338880185418, 0.0]
+    old = _ended_pair_from_rest(3, 7, True, s0)
+    t = 0.4658126677612029
+    choice, scene, _ = _throw_event(
+        "die", 300, 0, 165, CONE_BESIDE_A_SLIDE_FROM_REST, old, CONE_B, t
+    )
+    _assert_sticks_at_both(choice, scene, (3, 7), 1, 0.48)
 
 
 # d12s of `contact_throws --n 300` (seed 0) at an event as a vertex's slip stopped: the
@@ -1253,8 +1358,9 @@ def test_a_shape_without_pairs_has_no_pair_search_in_its_program(monkeypatch):
         resting = jnp.ones(model.num_points, bool)
         candidate = CandidateTable(model).mode(0, old)
         searched.clear()
-        args = (0.0, state, geom, candidate, scene, model, TOL, resting, resting, True)
-        eqx.filter_eval_shape(select._candidate, *args)
+        continued = (jnp.zeros(2, bool), jnp.zeros((2, 3)))  # no slide goes on
+        args = (0.0, state, geom, candidate, scene, model, TOL, resting, resting, continued)
+        eqx.filter_eval_shape(select._candidate, *args, True)
         assert searched == ([True] if pairs else [])
 
 

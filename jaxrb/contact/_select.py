@@ -15,12 +15,24 @@ import numpy as np
 
 from .._linalg import solve as small_solve
 from .._quaternion import _safe_norm
-from ._events import AXIAL, CONE_A, CONE_B, COP, NORMAL_A, NORMAL_B, UNUSED, conditions
+from ._events import (
+    AXIAL,
+    CONE_A,
+    CONE_B,
+    COP,
+    NORMAL_A,
+    NORMAL_B,
+    SLIP_A,
+    SLIP_B,
+    UNUSED,
+    conditions,
+)
 from ._modes import (
     FACE,
     PAIR,
     POINT,
     active_points,
+    blend_direction,
     cross,
     face_twist,
     held_and_sliding,
@@ -30,6 +42,7 @@ from ._modes import (
     only_where_needed,
     point_coefficients,
     support_vertex_b,
+    support_vertex_starts,
     tree_index,
     tree_where,
     tree_zeros,
@@ -208,12 +221,40 @@ def not_p_matrix(sol, mode, body) -> jax.Array:
     return ~jnp.where(mode.kind == PAIR, both, single)
 
 
-def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live):
+def continued_slides(mode, old, trigger, zero_slip):
+    """The ends (a, b) of the candidate `mode` that go on with a slide from rest of the mode
+    `old` that the event ended (`trigger` indexes the condition vector): the same point,
+    sliding in both, its slip not at rest (`zero_slip`, (P,)), that slide's end not the
+    event, and no impact at the event (`trigger` >= 0). Such an end keeps the old slide's
+    start direction s0, and with it its friction law (opposing unit(s + blend s0)): the
+    slip of a point that goes on sliding is the same function of state across an event
+    elsewhere, and so are the candidates' forces and gap accelerations where they meet the
+    old mode's at the boundary just reached. Returns ((2,) bool, (2, 3) world directions
+    s0, zero where not kept)."""
+    P = zero_slip.shape[0]
+    k = trigger - P
+    slides = jnp.stack(
+        [(old.kind == POINT) | (old.kind == PAIR), (old.kind == PAIR) | support_vertex_starts(old)]
+    )
+    old_ends = old.from_rest & ~old.stick & slides
+    old_ends = old_ends & ~jnp.stack([k == SLIP_A, k == SLIP_B]) & (k >= 0)  # no impact
+    old_points = jnp.stack([old.a, old.b])
+    points = jnp.stack([mode.a, mode.b])
+    ends = jnp.stack([(mode.kind == POINT) | (mode.kind == PAIR), mode.kind == PAIR])
+    ends = ends & ~mode.stick & ~zero_slip[points]
+    match = (points[:, None] == old_points[None, :]) & old_ends[None, :]  # (candidate, old)
+    kept = ends & jnp.any(match, axis=1)
+    directions = jnp.where(match[:, :, None], old.slide_dir[None, :, :], 0.0).sum(axis=1)
+    return kept, jnp.where(kept[:, None], directions, 0.0)
+
+
+def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, continued, live):
     """Solve one candidate, finding the directions of any sliding that starts from rest by
     fixed-point iteration (s_hat <- s'(s_hat) / |s'(s_hat)|). Returns (the mode with those
-    directions, its margins: all must be >= 0 for it to be consistent). `live`: whether the
-    event's choice is used (False: a finished member of a batch, whose searches are
-    skipped)."""
+    directions, its margins: all must be >= 0 for it to be consistent). `continued`: the
+    ends that go on with a slide from rest and its start directions (`continued_slides`);
+    `live`: whether the event's choice is used (False: a finished member of a batch, whose
+    searches are skipped)."""
     dtype = state.pos.dtype
     zero3 = jnp.zeros(3, dtype)
     beta = jnp.asarray(tol.stabilisation, dtype)
@@ -263,10 +304,15 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
     bp = frame.T @ (Jp @ u_dot - Kp @ lam[keep] + rows.bias[keep]) + offsets[mode.a]
     mu, _, _ = point_coefficients(scene, model)
 
+    # a sliding end: friction opposes its slip (a slide from rest that goes on: the blend
+    # with its start direction)
+    kept, kept_dirs = continued
+    blend = lambda p, s0: blend_direction(geom.slip[p], s0, tol.slip_blend)  # noqa: E731
+
     def seeds(need_a):
         return (
-            jnp.where(rest_a, unit_or(-need_a, zero3), unit_or(geom.slip[mode.a], zero3)),
-            jnp.where(rest_b, unit_or(-need_b, zero3), unit_or(geom.slip[mode.b], zero3)),
+            jnp.where(rest_a, unit_or(-need_a, zero3), blend(mode.a, kept_dirs[0])),
+            jnp.where(rest_b, unit_or(-need_b, zero3), blend(mode.b, kept_dirs[1])),
             jnp.where(rest_f, unit_or(-need_f, zero3), unit_or(twist, zero3)),
         )
 
@@ -359,15 +405,18 @@ def _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live
             jnp.where(rest_f, st @ hats[2], UNUSED),
         ]
     )
-    # the blend direction only for a slide from rest: any other slide's friction opposes its
-    # own slip exactly (a blend kept along the start direction would bias it all the way)
+    # the blend direction only for a slide from rest, and one that goes on: any other
+    # slide's friction opposes its own slip exactly (a blend kept along a start direction
+    # would bias it all the way)
     chosen = eqx.tree_at(
         lambda m: (m.slide_dir, m.twist_dir, m.from_rest),
         mode,
         (
-            jnp.stack([jnp.where(rest_a, hats[0], zero3), jnp.where(rest_b, hats[1], zero3)]),
+            jnp.stack(
+                [jnp.where(rest_a, hats[0], kept_dirs[0]), jnp.where(rest_b, hats[1], kept_dirs[1])]
+            ),
             jnp.where(rest_f, hats[2], zero3),
-            jnp.stack([rest_a | rest_f, rest_b]),
+            jnp.stack([rest_a | rest_f | kept[0], rest_b | kept[1]]),
         ),
     )
     # a sticking face needs its slip twist at rest (its corners' slips may be larger); a
@@ -466,7 +515,8 @@ def exclusions(table, candidates, model, old, trigger, zero_slip, resting):
     while the other end still slides (`zero_slip`: (P,) points whose slip is below
     slip_stop); and a mode that also holds a point the ended mode did not hold, resting
     (`resting`, (P,)) as the event came, is another contact, whose forces the event has not
-    tested."""
+    tested. A mode that sticks where the ended mode slid from rest, that slide not ended by
+    the event, is tried only where nothing else fits."""
     P = model.num_points
     old_active = active_points(model, old)
     t_active = jnp.asarray(table.active)[candidates]
@@ -515,7 +565,25 @@ def exclusions(table, candidates, model, old, trigger, zero_slip, resting):
     # (a point that came down onto the floor as the boundary was reached: a gap that closed
     # within the event's tolerance of it)
     holds_new = jnp.any(t_active & resting & ~old_active, axis=1)
-    return excluded, excluded & ((same_pair & other_end_stopped) | holds_new)
+    readmitted = excluded & ((same_pair & other_end_stopped) | holds_new)
+    # a point that started to slide from rest in the ended mode, its slide not ended by the
+    # event (and no impact changed its slip: `trigger` >= 0), slides on: a mode that holds
+    # it sticking is tried only where nothing else fits (its slip may still lie below
+    # slip_stop, where sticking is admissible, and would end a slide that is starting,
+    # which no condition ended; any other slide with its slip that low is ending)
+    stops = (k >= 0) & jnp.any(t_sticking & _starts_on(old, k, idx), axis=1)
+    return excluded | stops, readmitted | (stops & ~excluded)
+
+
+def _starts_on(old, k, idx):
+    """Mask (P,) of the points (`idx`: their indices) that slide from rest in the mode
+    `old` (a point's or a pair's ends; a support's vertex) and whose slide the event's
+    force condition `k` did not end."""
+    on_points = (old.kind == POINT) | (old.kind == PAIR)
+    starts_a = on_points & ~old.stick[0] & old.from_rest[0] & (k != SLIP_A)
+    starts_b = ((old.kind == PAIR) & ~old.stick[1]) | support_vertex_starts(old)
+    starts_b = starts_b & old.from_rest[1] & (k != SLIP_B)
+    return ((idx == old.a) & starts_a) | ((idx == old.b) & starts_b)
 
 
 def select_mode(
@@ -530,7 +598,10 @@ def select_mode(
     @eqx.filter_jit  # traced once, for its shapes and for its chunks
     def one(i):
         mode = table.mode(i, old)
-        return _candidate(t, state, geom, mode, scene, model, tol, resting, zero_slip, live)
+        continued = continued_slides(mode, old, trigger, zero_slip)
+        return _candidate(
+            t, state, geom, mode, scene, model, tol, resting, zero_slip, continued, live
+        )
 
     t_active = jnp.asarray(table.active)[candidates]
     held_resting = jnp.all(~t_active | resting, axis=1)  # every point it holds rests
