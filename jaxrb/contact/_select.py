@@ -221,6 +221,17 @@ def not_p_matrix(sol, mode, body) -> jax.Array:
     return ~jnp.where(mode.kind == PAIR, both, single)
 
 
+def unended_starts(old, k):
+    """(2,) whether end a / end b of the mode `old` (a point's or a pair's end; a support's
+    vertex b) slides from rest, that slide not ended by the event: its condition not the
+    event's force condition `k` (the trigger less the number of points), and no impact at
+    the event (which changes the slips; `k` < 0 then)."""
+    on_points = (old.kind == POINT) | (old.kind == PAIR)
+    ends = jnp.stack([on_points, (old.kind == PAIR) | support_vertex_starts(old)])
+    ended = jnp.stack([k == SLIP_A, k == SLIP_B])
+    return ends & old.from_rest & ~old.stick & ~ended & (k >= 0)
+
+
 def continued_slides(mode, old, trigger, zero_slip):
     """The ends (a, b) of the candidate `mode` that go on with a slide from rest of the mode
     `old` that the event ended (`trigger` indexes the condition vector): the same point,
@@ -231,13 +242,7 @@ def continued_slides(mode, old, trigger, zero_slip):
     elsewhere, and so are the candidates' forces and gap accelerations where they meet the
     old mode's at the boundary just reached. Returns ((2,) bool, (2, 3) world directions
     s0, zero where not kept)."""
-    P = zero_slip.shape[0]
-    k = trigger - P
-    slides = jnp.stack(
-        [(old.kind == POINT) | (old.kind == PAIR), (old.kind == PAIR) | support_vertex_starts(old)]
-    )
-    old_ends = old.from_rest & ~old.stick & slides
-    old_ends = old_ends & ~jnp.stack([k == SLIP_A, k == SLIP_B]) & (k >= 0)  # no impact
+    old_ends = unended_starts(old, trigger - zero_slip.shape[0])
     old_points = jnp.stack([old.a, old.b])
     points = jnp.stack([mode.a, mode.b])
     ends = jnp.stack([(mode.kind == POINT) | (mode.kind == PAIR), mode.kind == PAIR])
@@ -567,23 +572,14 @@ def exclusions(table, candidates, model, old, trigger, zero_slip, resting):
     holds_new = jnp.any(t_active & resting & ~old_active, axis=1)
     readmitted = excluded & ((same_pair & other_end_stopped) | holds_new)
     # a point that started to slide from rest in the ended mode, its slide not ended by the
-    # event (and no impact changed its slip: `trigger` >= 0), slides on: a mode that holds
-    # it sticking is tried only where nothing else fits (its slip may still lie below
-    # slip_stop, where sticking is admissible, and would end a slide that is starting,
-    # which no condition ended; any other slide with its slip that low is ending)
-    stops = (k >= 0) & jnp.any(t_sticking & _starts_on(old, k, idx), axis=1)
+    # event (and no impact changed its slip), slides on: a mode that holds it sticking is
+    # tried only where nothing else fits (its slip may still lie below slip_stop, where
+    # sticking is admissible, and would end a slide that is starting, which no condition
+    # ended; any other slide with its slip that low is ending)
+    starts = unended_starts(old, k)
+    starting = ((idx == old.a) & starts[0]) | ((idx == old.b) & starts[1])
+    stops = jnp.any(t_sticking & starting, axis=1)
     return excluded | stops, readmitted | (stops & ~excluded)
-
-
-def _starts_on(old, k, idx):
-    """Mask (P,) of the points (`idx`: their indices) that slide from rest in the mode
-    `old` (a point's or a pair's ends; a support's vertex) and whose slide the event's
-    force condition `k` did not end."""
-    on_points = (old.kind == POINT) | (old.kind == PAIR)
-    starts_a = on_points & ~old.stick[0] & old.from_rest[0] & (k != SLIP_A)
-    starts_b = ((old.kind == PAIR) & ~old.stick[1]) | support_vertex_starts(old)
-    starts_b = starts_b & old.from_rest[1] & (k != SLIP_B)
-    return ((idx == old.a) & starts_a) | ((idx == old.b) & starts_b)
 
 
 def select_mode(
