@@ -78,6 +78,13 @@ def make_errors(omega0):
     inertia = jnp.asarray(INERTIA)
     w_exact = jax.vmap(lambda w: asymmetric_top(T_END, inertia, w))(omega0)
     ref = reference_attitude(omega0)
+    return error_against(w_exact, ref, omega0), w_exact, ref
+
+
+def error_against(w_exact, ref, omega0):
+    """The error function of results (omega_T (N,3), quat_T (N,4)), any dtype, against the
+    final rates `w_exact` and unit attitudes `ref`: the worst body's max(relative omega
+    error, geodesic angle)."""
     w0n = jnp.linalg.norm(omega0, axis=-1)
 
     def error(omega_T, quat_T):
@@ -88,7 +95,7 @@ def make_errors(omega0):
         e_q = jaxrb.quat_geodesic_angle(quat_T, ref)
         return float(jnp.max(jnp.maximum(e_w, e_q)))
 
-    return error, w_exact, ref
+    return error
 
 
 def rk4_fixed(scene, n_steps):

@@ -134,11 +134,13 @@ def simulate(
     so that each solve's buffers stay in a core's cache: `num_steps` is then the count of
     the member's part (`jaxrb.simulate_batch` takes another `part_size`). Elsewhere (a GPU)
     a `diffrax.Tsit5`, `Dopri5` or `Dopri8` takes the batch's steps with its stages written
-    out (the same method and steps, results equal to roundoff; `jaxrb/_unrolled_stages.py`):
-    B1 at N = 1e6 on an H200 costs 2.5x less per body than with diffrax's loop over the
-    stages. A member with bad
-    input is flagged in `result` (with `throw=False`), takes no part in the step control and
-    has NaN states; the others are computed. The solve is differentiable like a single
+    out (the same method and steps, results equal to roundoff; `jaxrb/_unrolled_stages.py`),
+    and for free bodies sharing one scene each step is a single GPU kernel
+    (`jaxrb/_fused_rotation_step.py`): B1 at N = 1e6 on an H200, Dopri8 at tol 5e-10 in
+    float64, 0.035 us per body against 0.24 with the stages written out and 0.63 with
+    diffrax's loop. Pass `jaxrb.unrolled_solver(...)` to keep one kernel per stage. A member
+    with bad input is flagged in `result` (with `throw=False`), takes no part in the step
+    control and has NaN states; the others are computed. The solve is differentiable like a single
     body's (reverse mode by default, forward mode with `adjoint=diffrax.ForwardMode()`).
     `jax.vmap(simulate)` still works and gives each member its own step-size control. A
     scene with a floor runs the contact engine per member: on a CPU one member after

@@ -20,7 +20,8 @@ Where it pays (benchmarks/README.md, "stages written out"):
 - a batch as one solve on a GPU: B1 (the torque-free body, N = 1e6) on an NVIDIA H200,
   Dopri8 at tol 5e-10 in float64 0.63 -> 0.25 us per body, float32 Dopri8 at tol 1e-6
   0.16 -> 0.06 us. On a 2-core x86 CPU, where a batch runs in parts that fit a core's cache,
-  it cost 0-10 % more: `batch_solver` uses the twins off a CPU only.
+  it cost 0-10 % more: `batch_solver` uses the twins off a CPU only. (A batch sharing one
+  free body goes further there: each step one kernel, `_fused_rotation_step.py`.)
 - one body's forward runs, alone or under `jax.vmap`, on a CPU (B1, N = 1000, error < 1e-8:
   `jax.vmap(simulate)` with Dopri8 124 -> 30 us per body, with Tsit5 168 -> 56 us).
 Where it costs: compiling. A reverse-mode gradient's backward pass holds every stage's
@@ -143,7 +144,8 @@ def unrolled_solver(solver):
     of diffrax's loop over the stages. Pass it as `simulate`'s `solver` for many forward
     runs of one body without a floor: on a 2-core CPU, `jax.vmap(simulate)` of B1 cost 3-4x
     less per body. A reverse-mode gradient compiles 1.5-3x longer with it. A batch as one
-    solve already uses it off a CPU. It is not for scenes with a floor: there it compiles
+    solve already uses it (or a step as one kernel) off a CPU; passed explicitly, a batch
+    keeps it (one XLA kernel per stage). It is not for scenes with a floor: there it compiles
     longer and runs no faster."""
     twin = _TWINS.get(type(solver))
     if twin is None:
@@ -154,8 +156,8 @@ def unrolled_solver(solver):
 def batch_solver(solver):
     """The solver a batch integrated as one solve uses: the written-out twin (`unrolled_solver`)
     except on a CPU (see the module docstring for the measurements behind the choice)."""
-    return solver if _on_cpu() else unrolled_solver(solver)
+    return solver if on_cpu() else unrolled_solver(solver)
 
 
-def _on_cpu() -> bool:
+def on_cpu() -> bool:
     return jax.default_backend() == "cpu"

@@ -115,7 +115,7 @@ def test_batch_solve_off_a_cpu_uses_the_written_out_stages(monkeypatch):
         return seen[-1]
 
     monkeypatch.setitem(_persistent._KEEP, "on", False)
-    monkeypatch.setattr(_unrolled_stages, "_on_cpu", lambda: False)
+    monkeypatch.setattr(_unrolled_stages, "on_cpu", lambda: False)
     monkeypatch.setattr(_unrolled_stages, "unrolled_solver", recorded)
     out = run(jnp.array([0.0, 1.0, 2.0, 5.0]))
     assert [type(s) for s in seen] == [UnrolledDopri8]

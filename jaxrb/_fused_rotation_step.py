@@ -1,0 +1,245 @@
+"""A batch of free rotations stepped by one GPU kernel per Runge-Kutta step.
+
+`simulate` of a batched `State` integrates the batch as one diffrax solve (`_batched.py`).
+With the stages written out (`_unrolled_stages.py`) XLA still runs a step as one kernel per
+stage, each writing its increment to memory and reading those of the earlier stages: for
+Dopri8 about 160 passes over the batch's arrays per step, and at N = 1e6 in float64 a step
+is bound by memory bandwidth. Here a step of the torque-free rotation is one Pallas kernel
+(Triton on an NVIDIA GPU): each GPU thread takes a member, keeps its 7 coordinates and all
+stages' increments in registers, and writes only y1 and the error estimate (7 + 7 rows). The
+step-size control, saving and adjoints stay diffrax's: the solver is diffrax's own method
+(`Tsit5`, `Dopri5`, `Dopri8`) whose `step` calls the kernel.
+
+Same method, same arithmetic: the kernel evaluates the sums of `unrolled_step` in the same
+order and the rates of `ROTATION.member_last_rates` (a FSAL method evaluates its first stage
+in the kernel on every step instead of carrying it: it costs registers, not memory). The
+steps taken are diffrax's; results agree to roundoff.
+
+Derivatives: the kernel has no derivative of its own. The step is a `jax.custom_jvp` whose
+tangent is the same step written in jax.numpy (`step_rows` on whole rows), so forward and
+reverse mode (diffrax's adjoints) differentiate the identical arithmetic, at the cost of
+running the step in XLA as well. The dense output's increments (saves between the end
+points) come from the same jax.numpy stages; XLA drops them where nothing reads them.
+
+Used for the torque-free rotation of a batch sharing one body (the B1 problem) off a CPU;
+elsewhere the written-out stages serve (`batch_solver`).
+
+Coordinates: quat (4, N) scalar first, body -> world; omega (3, N) body frame (rad/s);
+inertia in body axes (kg m^2), the member axis last.
+"""
+
+import diffrax as dfx
+import jax
+import jax.numpy as jnp
+
+BLOCK = 128
+"""Members per kernel instance (one per GPU thread at `NUM_WARPS` = 4 warps of 32)."""
+NUM_WARPS = 4
+
+
+def scalar_vector(dt, body, dtype) -> jax.Array:
+    """The kernel's scalars as one vector: dt (s), then J and J^-1 (principal: 3 + 3 values;
+    full: 9 + 9, row-major), zero-padded to a power of two (8 or 32) for Triton."""
+    inertia = body.inertia.astype(dtype)
+    inverse = body.inertia_inverse
+    if inverse is None:
+        raise ValueError("the fused rotation step needs the body's cached J^-1")
+    values = jnp.concatenate(
+        [jnp.reshape(dt, (1,)).astype(dtype), inertia.ravel(), inverse.astype(dtype).ravel()]
+    )
+    size = 8 if body.principal else 32
+    return jnp.pad(values, (0, size - values.shape[0]))
+
+
+def rotation_rates_rows(scalars, principal: bool, rows):
+    """Rates of the torque-free rotation, row by row: `rows` = (q0, q1, q2, q3, w1, w2, w3),
+    each an array over members; `scalars` indexable as `scalar_vector`'s entries. The same
+    operations as `ROTATION.member_last_rates`: body-frame Euler equations and q' =
+    q (x) (0, omega) / 2."""
+    q0, q1, q2, q3, w1, w2, w3 = rows
+    if principal:
+        j = [scalars[1 + i] for i in range(3)]
+        inv = [scalars[4 + i] for i in range(3)]
+        h1, h2, h3 = j[0] * w1, j[1] * w2, j[2] * w3
+        c1, c2, c3 = w2 * h3 - w3 * h2, w3 * h1 - w1 * h3, w1 * h2 - w2 * h1
+        dw = (-c1 * inv[0], -c2 * inv[1], -c3 * inv[2])
+    else:
+        j = [[scalars[1 + 3 * r + c] for c in range(3)] for r in range(3)]
+        inv = [[scalars[10 + 3 * r + c] for c in range(3)] for r in range(3)]
+        h1, h2, h3 = (j[r][0] * w1 + j[r][1] * w2 + j[r][2] * w3 for r in range(3))
+        c1, c2, c3 = w2 * h3 - w3 * h2, w3 * h1 - w1 * h3, w1 * h2 - w2 * h1
+        dw = tuple(-(inv[r][0] * c1 + inv[r][1] * c2 + inv[r][2] * c3) for r in range(3))
+    dq = (
+        0.5 * (-q1 * w1 - q2 * w2 - q3 * w3),
+        0.5 * (q0 * w1 + q2 * w3 - q3 * w2),
+        0.5 * (q0 * w2 + q3 * w1 - q1 * w3),
+        0.5 * (q0 * w3 + q1 * w2 - q2 * w1),
+    )
+    return dq + dw
+
+
+def _weighted_rows(coefficients, ks):
+    """sum_j c_j k_j row by row over the non-zero c_j, summed as `unrolled_step` sums; None
+    if every c_j is zero."""
+    terms = [(float(c), k) for c, k in zip(coefficients, ks, strict=True) if float(c) != 0.0]
+    if not terms:
+        return None
+    total = None
+    for c, k in terms:
+        if total is None:
+            total = [c * x for x in k]
+        else:
+            total = [t + c * x for t, x in zip(total, k, strict=True)]
+    return total
+
+
+def stage_increments(tableau, scalars, principal, rows):
+    """Every stage's increment k_i = dt f(Y_i) (a list over the stages of 7 rows each) and
+    y1's rows."""
+    dt = scalars[0]
+
+    def increment(y):
+        return [dt * r for r in rotation_rates_rows(scalars, principal, y)]
+
+    ks = [increment(rows)]
+    y_stage = rows
+    for i in range(1, len(tableau.c) + 1):
+        inc = _weighted_rows(tableau.a_lower[i - 1], ks)
+        y_stage = rows if inc is None else [y + d for y, d in zip(rows, inc, strict=True)]
+        ks.append(increment(y_stage))
+    if tableau.ssal:
+        y1 = y_stage
+    else:
+        inc = _weighted_rows(tableau.b_sol, ks)
+        y1 = [y + d for y, d in zip(rows, inc, strict=True)]
+    return ks, y1
+
+
+def step_rows(tableau, scalars, principal, rows):
+    """One step: (y1 rows, error-estimate rows), as `unrolled_step` computes them."""
+    ks, y1 = stage_increments(tableau, scalars, principal, rows)
+    error = _weighted_rows(tableau.b_error, ks)
+    if error is None:
+        error = [jnp.zeros_like(r) for r in rows]
+    return tuple(y1), tuple(error)
+
+
+def _kernel(tableau, principal, n_scalars):
+    def kernel(scalars_ref, *refs):
+        inputs, outputs = refs[:7], refs[7:]
+        scalars = [scalars_ref[i] for i in range(n_scalars)]
+        rows = [ref[...] for ref in inputs]
+        y1, error = step_rows(tableau, scalars, principal, rows)
+        for ref, value in zip(outputs, y1 + error, strict=True):
+            ref[...] = value
+
+    return kernel
+
+
+def padded_members(y, total):
+    """`y` (..., N) with its last member repeated to `total` members: the kernel takes whole
+    blocks of `BLOCK` members (Triton does not mask a partial last block's loads and stores
+    here: they reached the neighbouring buffers on an H200)."""
+    pad = total - y.shape[-1]
+    if pad == 0:
+        return y
+    return jnp.pad(y, [(0, 0)] * (y.ndim - 1) + [(0, pad)], mode="edge")
+
+
+def _pallas_step(tableau, principal, interpret, scalars, quat, omega):
+    from jax.experimental import pallas as pl  # imported where used: not on every start
+
+    n = quat.shape[-1]
+    if n % BLOCK:
+        raise ValueError(f"the fused step takes whole blocks of {BLOCK} members, got {n}")
+    row_specs = [pl.BlockSpec((None, BLOCK), lambda i, r=r: (r, i)) for r in range(4)] + [
+        pl.BlockSpec((None, BLOCK), lambda i, r=r: (r, i)) for r in range(3)
+    ]
+    compiler_params = None
+    if not interpret:
+        from jax.experimental.pallas import triton as pl_triton
+
+        compiler_params = pl_triton.CompilerParams(num_warps=NUM_WARPS)
+    outs = pl.pallas_call(
+        _kernel(tableau, principal, scalars.shape[0]),
+        grid=(n // BLOCK,),
+        in_specs=[pl.BlockSpec(scalars.shape, lambda i: (0,))] + row_specs,
+        out_specs=[pl.BlockSpec((BLOCK,), lambda i: (i,))] * 14,
+        out_shape=[jax.ShapeDtypeStruct((n,), quat.dtype)] * 14,
+        interpret=interpret,
+        compiler_params=compiler_params,
+        name="fused_rotation_step",
+    )(scalars, quat, quat, quat, quat, omega, omega, omega)
+    return _as_coordinates(outs[:7]), _as_coordinates(outs[7:])
+
+
+def _as_coordinates(rows):
+    return jnp.stack(rows[:4]), jnp.stack(rows[4:])
+
+
+def _xla_step(tableau, principal, scalars, quat, omega):
+    rows = list(quat) + list(omega)
+    y1, error = step_rows(tableau, scalars, principal, rows)
+    return _as_coordinates(y1), _as_coordinates(error)
+
+
+def _fused_step_impl(tableau, principal, interpret, scalars, quat, omega):
+    return _pallas_step(tableau, principal, interpret, scalars, quat, omega)
+
+
+fused_step = jax.custom_jvp(_fused_step_impl, nondiff_argnums=(0, 1, 2))
+"""(tableau, principal, interpret, scalars, quat, omega) -> ((quat1, omega1), (quat_err,
+omega_err)): one step by the kernel, differentiable through the same step in jax.numpy."""
+
+
+@fused_step.defjvp
+def _fused_step_jvp(tableau, principal, interpret, primals, tangents):
+    out = fused_step(tableau, principal, interpret, *primals)
+    _, tangent = jax.jvp(lambda *p: _xla_step(tableau, principal, *p), primals, tangents)
+    return out, tangent
+
+
+class _FusedRotation:
+    """The `step` of the fused solvers: diffrax's method, its step one kernel (see the module
+    docstring). `body` carries J and the cached J^-1; `interpret`: run the kernel in Pallas's
+    interpreter (any backend; for tests)."""
+
+    def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
+        del terms, args, made_jump
+        quat, omega = y0
+        scalars = scalar_vector(t1 - t0, self.body, omega.dtype)
+        tableau = self.tableau
+        y1, y_error = fused_step(tableau, self.body.principal, self.interpret, scalars, quat, omega)
+        ks, _ = stage_increments(tableau, scalars, self.body.principal, list(quat) + list(omega))
+        k_stacked = (
+            jnp.stack([jnp.stack(k[:4]) for k in ks]),
+            jnp.stack([jnp.stack(k[4:]) for k in ks]),
+        )  # read only by saves between the end points; otherwise dropped by XLA
+        dense_info = dict(y0=y0, y1=y1, k=k_stacked)
+        if tableau.fsal:  # the kernel evaluates the first stage itself: nothing is carried
+            solver_state = (jnp.array(True), solver_state[1])
+        return y1, y_error, dense_info, solver_state, dfx.RESULTS.successful
+
+
+def _fused_class(base):
+    import equinox as eqx
+
+    class Fused(_FusedRotation, base):
+        body: object = None
+        interpret: bool = eqx.field(static=True, default=False)
+
+    Fused.__name__ = Fused.__qualname__ = f"FusedRotation{base.__name__}"
+    return Fused
+
+
+_FUSED = {cls: _fused_class(cls) for cls in (dfx.Tsit5, dfx.Dopri5, dfx.Dopri8)}
+
+
+def fused_rotation_solver(solver, body, interpret: bool = False):
+    """The fused twin of a `diffrax.Tsit5`, `Dopri5` or `Dopri8` (its exact class) for the
+    torque-free rotation of `body` (J^-1 cached: `RigidBody.with_inertia_inverse`), or None
+    for any other solver."""
+    fused = _FUSED.get(type(solver))
+    if fused is None:
+        return None
+    return fused(scan_kind=solver.scan_kind, body=body, interpret=interpret)
