@@ -4,8 +4,8 @@ The torque-free asymmetric top of B1 (J = (1, 2, 3) kg m^2, T = 20 s, omega0 = (
 with a ~ U(0.5, 1.5), c ~ U(1, 2) rad/s), N bodies as one `jaxrb.simulate` of a batched
 state, one device. Rows side by side in one run:
 
-- "fused": `simulate` as a user calls it (`solver=diffrax.Dopri8()` or `Tsit5()`): off a
-  CPU each step of the shared body's free rotation is one kernel
+- "fused": `simulate` as a user calls it (`solver=diffrax.Dopri8()` or `Tsit5()`): on a
+  GPU each step of the shared body's free rotation is one kernel
   (`jaxrb/_fused_rotation_step.py`);
 - "written out": the same method through `jaxrb.unrolled_solver(...)`, one XLA kernel per
   stage (what `simulate` used before).

@@ -25,7 +25,7 @@ import numpy as np
 
 from ._checks import as_computed, is_concrete
 from ._coordinates import ROTATION, coordinates_for
-from ._fused_rotation_step import BLOCK, fused_rotation_solver, padded_members
+from ._fused_rotation_step import BLOCK, fused_rotation_solver, on_gpu, padded_members
 from ._inputs import check_concrete_inputs, input_result, safe_times
 from ._persistent import entry_point
 from ._results import RESULTS, raise_if_failed
@@ -34,7 +34,7 @@ from ._solve import DEFAULT_MAX_STEPS, default_solver, solve
 from ._solver_settings import solver_settings
 from ._state import State
 from ._trajectory import Trajectory
-from ._unrolled_stages import batch_solver, on_cpu
+from ._unrolled_stages import batch_solver
 
 
 def batch_rms_norm(tree, member_axis: int = -1) -> jax.Array:
@@ -151,8 +151,8 @@ def simulate_batched(scene, states0, ts, settings, batched_scene=False, part=Non
 
 def _solve_part(scene, states0, ts, settings, batched_scene):
     """One solve of all members of `states0` (see `simulate_batched`). Off a CPU, an explicit
-    Runge-Kutta solver takes its steps with the stages written out (`batch_solver`); for the
-    free rotation of bodies sharing one scene, each step is one kernel
+    Runge-Kutta solver takes its steps with the stages written out (`batch_solver`); on a
+    GPU, for the free rotation of bodies sharing one scene, each step is one kernel
     (`_fused_rotation_step.py`)."""
     coords = coordinates_for(scene)
     scene_axes = 0 if batched_scene else None
@@ -189,7 +189,8 @@ def _solve_part(scene, states0, ts, settings, batched_scene):
         batch_rates = jax.vmap(member_rates, in_axes=(scene_axes, None, -1, 0, 0), out_axes=-1)
     else:
         batch_rates = lambda scene_, t, y, *_: coords.member_last_rates(scene_, y)  # noqa: E731
-    fused = None if masked or on_cpu() else fused_rotation_solver(settings.solver, rates_scene.body)
+    one_kernel = on_gpu() and not masked  # a step as one kernel: shared free rotation, a GPU
+    fused = fused_rotation_solver(settings.solver, rates_scene.body) if one_kernel else None
     solver = batch_solver(settings.solver) if fused is None else fused
     settings = eqx.tree_at(lambda s: s.solver, settings, solver)
     y0 = jax.vmap(coords.reduce, in_axes=(scene_axes, 0), out_axes=-1)(scene, states0)
@@ -254,8 +255,8 @@ def simulate_batch(
     - `solver`: any diffrax solver; default as `simulate` for a batch: `diffrax.Dopri8()`
       below rtol 1e-5 (and for a traced rtol), else `diffrax.Tsit5()`. Off a CPU a
       `Tsit5`, `Dopri5` or `Dopri8` takes its steps with the stages written out (the same
-      method and steps; `jaxrb/_unrolled_stages.py`); for free bodies sharing one scene,
-      each step is one kernel (`jaxrb/_fused_rotation_step.py`).
+      method and steps; `jaxrb/_unrolled_stages.py`); on a GPU, for free bodies sharing one
+      scene, each step is one kernel (`jaxrb/_fused_rotation_step.py`).
     - `adjoint`: as `simulate`: reverse mode by default, `diffrax.ForwardMode()` for forward
       mode.
     - `batched_scene`: see `scene`.

@@ -21,7 +21,7 @@ Where it pays (benchmarks/README.md, "stages written out"):
   Dopri8 at tol 5e-10 in float64 0.63 -> 0.25 us per body, float32 Dopri8 at tol 1e-6
   0.16 -> 0.06 us. On a 2-core x86 CPU, where a batch runs in parts that fit a core's cache,
   it cost 0-10 % more: `batch_solver` uses the twins off a CPU only. (A batch sharing one
-  free body goes further there: each step one kernel, `_fused_rotation_step.py`.)
+  free body goes further on a GPU: each step one kernel, `_fused_rotation_step.py`.)
 - one body's forward runs, alone or under `jax.vmap`, on a CPU (B1, N = 1000, error < 1e-8:
   `jax.vmap(simulate)` with Dopri8 124 -> 30 us per body, with Tsit5 168 -> 56 us).
 Where it costs: compiling. A reverse-mode gradient's backward pass holds every stage's
@@ -144,7 +144,7 @@ def unrolled_solver(solver):
     of diffrax's loop over the stages. Pass it as `simulate`'s `solver` for many forward
     runs of one body without a floor: on a 2-core CPU, `jax.vmap(simulate)` of B1 cost 3-4x
     less per body. A reverse-mode gradient compiles 1.5-3x longer with it. A batch as one
-    solve already uses it (or a step as one kernel) off a CPU; passed explicitly, a batch
+    solve already uses it off a CPU (or, on a GPU, a step as one kernel); passed explicitly, a batch
     keeps it (one XLA kernel per stage). It is not for scenes with a floor: there it compiles
     longer and runs no faster."""
     twin = _TWINS.get(type(solver))

@@ -111,8 +111,8 @@ def test_the_fused_step_derivatives_equal_finite_differences():
         assert abs(float(forward) - reverse) <= 1e-12 * max(1.0, abs(reverse))
 
 
-def test_simulate_off_a_cpu_uses_the_fused_step_for_a_batch(monkeypatch):
-    """`simulate` of a batch sharing one free body, as off a CPU (the kernel interpreted):
+def test_simulate_on_a_gpu_uses_the_fused_step_for_a_batch(monkeypatch):
+    """`simulate` of a batch sharing one free body, as on a GPU (the kernel interpreted):
     the fused solver is chosen, the batch (not a whole number of blocks) is padded with its
     last member and cut back, and steps and states equal the CPU's plain Dopri8 solve."""
     scene = jaxrb.Scene(jaxrb.RigidBody(1.0, I123))
@@ -132,7 +132,7 @@ def test_simulate_off_a_cpu_uses_the_fused_step_for_a_batch(monkeypatch):
         return chosen[-1]
 
     monkeypatch.setitem(_persistent._KEEP, "on", False)
-    monkeypatch.setattr(_batched, "on_cpu", lambda: False)
+    monkeypatch.setattr(_batched, "on_gpu", lambda: True)
     monkeypatch.setattr(_batched, "fused_rotation_solver", interpreted)
     out = jaxrb.simulate(scene, states, ts, solver=dfx.Dopri8(), rtol=1e-9, atol=1e-9)
     assert [type(s).__name__ for s in chosen] == ["FusedRotationDopri8"]
@@ -157,3 +157,22 @@ def test_only_explicit_diffrax_methods_have_a_fused_twin():
     assert fused_rotation_solver(dfx.Heun(), body) is None
     assert fused_rotation_solver(jaxrb.unrolled_solver(dfx.Dopri8()), body) is None
     assert type(fused_rotation_solver(dfx.Dopri5(), body)).__name__ == "FusedRotationDopri5"
+
+
+@pytest.mark.parametrize("inertia", [I123, FULL], ids=["principal", "full"])
+def test_the_kernel_lowers_to_triton(inertia):
+    """The kernel (not interpreted) lowers for an NVIDIA GPU from this machine: every
+    operation in it has a Triton lowering, for both inertia forms and a first-same-as-last
+    method. (Compiling the Triton module needs the GPU; B1 ran it on an H200.)"""
+    body = jaxrb.RigidBody(1.0, inertia).with_inertia_inverse()
+    quat, omega = _members(2 * BLOCK)
+    scalars = scalar_vector(0.1, body, jnp.float64)
+    for tableau in (dfx.Dopri8().tableau, dfx.Tsit5().tableau):
+
+        def step(scalars, quat, omega, tableau=tableau):
+            return fused_step(tableau, body.principal, False, scalars, quat, omega)
+
+        lowered = jax.jit(step).trace(scalars, quat, omega).lower(lowering_platforms=("cuda",))
+        text = lowered.as_text()
+        assert text.count("xla.gpu.triton") == 1
+        assert "fused_rotation_step" in text
