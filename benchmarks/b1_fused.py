@@ -17,6 +17,7 @@ call less the best. Also: the reverse-mode gradient of a weighted sum of the fin
 with respect to every omega0 (100 checkpoints), both ways, and its agreement between them.
 
     python -m benchmarks.b1_fused --n 1000000 --out bench_out      # on a GPU
+    python -m benchmarks.b1_fused --plot bench_out/b1_fused.json   # its picture, anywhere
 
 On a CPU the fused step is not used by `simulate` (its kernel is Triton's); this script then
 says so and stops.
@@ -142,6 +143,32 @@ def gradient_rows(n):
     return rows
 
 
+def plot(results_path):
+    """Work against precision of a saved run (`b1_fused.json`): error against us per body,
+    one line per method and dtype; written beside it as `b1_fused.png`."""
+    with open(results_path) as f:
+        saved = json.load(f)
+    rows = [
+        C.Row(
+            problem="B1",
+            method=r["method"],
+            dtype=r["dtype"],
+            setting=str(r["tol"]),
+            n=saved["n"],
+            error=r["error"],
+            us_per_body=r["us_per_body"],
+            compile_s=r["compile_s"] or float("nan"),
+            steps=r["steps"],
+        )
+        for r in saved["rows"]
+        if "error" in r
+    ]
+    path = os.path.join(os.path.dirname(results_path), "b1_fused.png")
+    title = f"B1, N = {saved['n']:.0e}, one solve: a step as one kernel ({saved['device']})"
+    C.plot_work_precision(rows, title, path)
+    print(f"wrote {os.path.abspath(path)}")
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--n", type=int, default=1_000_000)
@@ -149,7 +176,11 @@ def main():
     p.add_argument("--no-solve", action="store_true", help="the gradient rows only")
     p.add_argument("--out", default="bench_out")
     p.add_argument("--force", action="store_true")
+    p.add_argument("--plot", metavar="JSON", help="only draw a saved run's picture")
     a = p.parse_args()
+    if a.plot:
+        plot(a.plot)
+        return
     if jax.default_backend() == "cpu":
         print("b1_fused: no GPU here; simulate does not use the fused step on a CPU")
         return
@@ -163,6 +194,8 @@ def main():
     with open(path, "w") as f:
         json.dump(dict(device=device, n=a.n, grad_n=a.grad_n, rows=rows), f, indent=1)
     print(f"wrote {os.path.abspath(path)}")
+    if rows and not a.no_solve:
+        plot(path)
 
 
 if __name__ == "__main__":
