@@ -31,6 +31,7 @@ inertia in body axes (kg m^2), the member axis last.
 """
 
 import diffrax as dfx
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 
@@ -154,9 +155,11 @@ def _pallas_step(tableau, principal, interpret, scalars, quat, omega):
     n = quat.shape[-1]
     if n % BLOCK:
         raise ValueError(f"the fused step takes whole blocks of {BLOCK} members, got {n}")
-    row_specs = [pl.BlockSpec((None, BLOCK), lambda i, r=r: (r, i)) for r in range(4)] + [
-        pl.BlockSpec((None, BLOCK), lambda i, r=r: (r, i)) for r in range(3)
-    ]
+
+    def row(r):  # row r of a (rows, N) array, a block of BLOCK members at a time
+        return pl.BlockSpec((None, BLOCK), lambda i: (r, i))
+
+    row_specs = [row(r) for r in range(4)] + [row(r) for r in range(3)]  # quat, then omega
     compiler_params = None
     if not interpret:
         from jax.experimental.pallas import triton as pl_triton
@@ -185,11 +188,7 @@ def _xla_step(tableau, principal, scalars, quat, omega):
     return _as_coordinates(y1), _as_coordinates(error)
 
 
-def _fused_step_impl(tableau, principal, interpret, scalars, quat, omega):
-    return _pallas_step(tableau, principal, interpret, scalars, quat, omega)
-
-
-fused_step = jax.custom_jvp(_fused_step_impl, nondiff_argnums=(0, 1, 2))
+fused_step = jax.custom_jvp(_pallas_step, nondiff_argnums=(0, 1, 2))
 """(tableau, principal, interpret, scalars, quat, omega) -> ((quat1, omega1), (quat_err,
 omega_err)): one step by the kernel, differentiable through the same step in jax.numpy."""
 
@@ -224,8 +223,6 @@ class _FusedRotation:
 
 
 def _fused_class(base):
-    import equinox as eqx
-
     class Fused(_FusedRotation, base):
         body: object = None
         interpret: bool = eqx.field(static=True, default=False)
