@@ -25,7 +25,7 @@ import numpy as np
 
 from ._checks import as_computed, is_concrete
 from ._coordinates import ROTATION, coordinates_for
-from ._fused_rotation_step import BLOCK, fused_rotation_solver, on_gpu, padded_members
+from ._fused_rotation_step import BLOCK, fused_rotation_solver, on_gpu
 from ._inputs import check_concrete_inputs, input_result, safe_times
 from ._persistent import entry_point
 from ._results import RESULTS, raise_if_failed
@@ -193,10 +193,11 @@ def _solve_part(scene, states0, ts, settings, batched_scene):
     fused = fused_rotation_solver(settings.solver, rates_scene.body) if one_kernel else None
     solver = batch_solver(settings.solver) if fused is None else fused
     settings = eqx.tree_at(lambda s: s.solver, settings, solver)
-    y0 = jax.vmap(coords.reduce, in_axes=(scene_axes, 0), out_axes=-1)(scene, states0)
     n = states0.pos.shape[0]
+    solved = states0
     if fused is not None:  # whole kernel blocks: the last member repeated (the same error)
-        y0 = jax.tree.map(lambda y: padded_members(y, -(-n // BLOCK) * BLOCK), y0)
+        solved = jax.tree.map(lambda x: _padded(x, -(-n // BLOCK) * BLOCK), states0)
+    y0 = jax.vmap(coords.reduce, in_axes=(scene_axes, 0), out_axes=-1)(scene, solved)
     ys, num_steps, solver_result = solve(
         lambda t, y: batch_rates(rates_scene, t, y, states0, valid),
         y0,

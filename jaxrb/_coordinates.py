@@ -55,6 +55,36 @@ class _Free(eqx.Module):
         return _quat_norm(ys.quat)
 
 
+def rotation_rates_rows(inertia, inverse, principal: bool, rows):
+    """The torque-free rotation's rates, row by row: `rows` = (q0, q1, q2, q3, w1, w2, w3),
+    each an array over members (quat scalar first, body -> world; omega in body axes, rad/s).
+    `inertia` and `inverse` are J and J^-1 in body axes (kg m^2 and its inverse), indexable
+    as the three principal moments (`principal`) or as a 3 x 3 tensor (`[r][c]`): arrays, or
+    lists of numbers (a GPU kernel's scalars). Returns the 7 rates' rows: q' = q (x) (0,
+    omega) / 2 as `quat_rate`, then omega' = -J^-1 (omega x J omega)."""
+    q0, q1, q2, q3, w1, w2, w3 = rows
+    if principal:
+        h1, h2, h3 = inertia[0] * w1, inertia[1] * w2, inertia[2] * w3
+    else:
+        h1, h2, h3 = (
+            inertia[r][0] * w1 + inertia[r][1] * w2 + inertia[r][2] * w3 for r in range(3)
+        )
+    c1, c2, c3 = w2 * h3 - w3 * h2, w3 * h1 - w1 * h3, w1 * h2 - w2 * h1  # omega x J omega
+    if principal:
+        omega_dot = (-c1 * inverse[0], -c2 * inverse[1], -c3 * inverse[2])
+    else:
+        omega_dot = tuple(
+            -(inverse[r][0] * c1 + inverse[r][1] * c2 + inverse[r][2] * c3) for r in range(3)
+        )
+    quat_dot = (
+        0.5 * (-q1 * w1 - q2 * w2 - q3 * w3),
+        0.5 * (q0 * w1 + q2 * w3 - q3 * w2),
+        0.5 * (q0 * w2 + q3 * w1 - q1 * w3),
+        0.5 * (q0 * w3 + q1 * w2 - q2 * w1),
+    )
+    return quat_dot + omega_dot
+
+
 class _Rotation(eqx.Module):
     """(quat, omega) of a free body with no moment about its mass centre; the mass centre's
     motion is the exact parabola of the scene's total gravity."""
@@ -78,23 +108,12 @@ class _Rotation(eqx.Module):
         body = scene.body
         inertia = body.inertia.astype(omega.dtype)
         inverse = body.inertia_inverse  # cached by the caller (once, not at every stage)
-        if body.principal:
-            inverse = (1.0 / inertia if inverse is None else inverse.astype(omega.dtype))[:, None]
-            omega_dot = -jnp.cross(omega, inertia[:, None] * omega, axis=0) * inverse
-        else:
-            inverse = inverse3(inertia) if inverse is None else inverse.astype(omega.dtype)
-            omega_dot = -(inverse @ jnp.cross(omega, inertia @ omega, axis=0))
-        q0, q1, q2, q3 = quat
-        w1, w2, w3 = omega
-        quat_dot = 0.5 * jnp.stack(  # q (x) (0, omega), as `quat_rate`
-            [
-                -q1 * w1 - q2 * w2 - q3 * w3,
-                q0 * w1 + q2 * w3 - q3 * w2,
-                q0 * w2 + q3 * w1 - q1 * w3,
-                q0 * w3 + q1 * w2 - q2 * w1,
-            ]
+        if inverse is None:
+            inverse = 1.0 / inertia if body.principal else inverse3(inertia)
+        rates = rotation_rates_rows(
+            inertia, inverse.astype(omega.dtype), body.principal, (*quat, *omega)
         )
-        return (quat_dot, omega_dot)
+        return (jnp.stack(rates[:4]), jnp.stack(rates[4:]))
 
     def states(self, scene, ys, ts, state0: State) -> State:
         """`ys` leaves have a leading time axis (T, ...); `ts` (T,) are their times (s)."""

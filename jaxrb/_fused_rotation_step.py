@@ -10,8 +10,9 @@ stages' increments in registers, and writes only y1 and the error estimate (7 + 
 step-size control, saving and adjoints stay diffrax's: the solver is diffrax's own method
 (`Tsit5`, `Dopri5`, `Dopri8`) whose `step` calls the kernel.
 
-Same method, same arithmetic: the kernel evaluates the sums of `unrolled_step` in the same
-order and the rates of `ROTATION.member_last_rates` (a FSAL method evaluates its first stage
+Same method, same arithmetic: the kernel forms the stages with `unrolled_step`'s sums
+(`combine_increments`, `weighted_sum`) and the rates with `rotation_rates_rows`, which
+`ROTATION.member_last_rates` uses too (a FSAL method evaluates its first stage
 in the kernel on every step instead of carrying it: it costs registers, not memory). The
 steps taken are diffrax's; results agree to roundoff.
 
@@ -35,6 +36,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from ._coordinates import rotation_rates_rows
+from ._unrolled_stages import combine_increments, weighted_sum
+
 BLOCK = 128
 """Members per kernel instance (one per GPU thread at `NUM_WARPS` = 4 warps of 32)."""
 NUM_WARPS = 4
@@ -54,46 +58,14 @@ def scalar_vector(dt, body, dtype) -> jax.Array:
     return jnp.pad(values, (0, size - values.shape[0]))
 
 
-def rotation_rates_rows(scalars, principal: bool, rows):
-    """Rates of the torque-free rotation, row by row: `rows` = (q0, q1, q2, q3, w1, w2, w3),
-    each an array over members; `scalars` indexable as `scalar_vector`'s entries. The same
-    operations as `ROTATION.member_last_rates`: body-frame Euler equations and q' =
-    q (x) (0, omega) / 2."""
-    q0, q1, q2, q3, w1, w2, w3 = rows
+def _rates(scalars, principal: bool, rows):
+    """`rotation_rates_rows` with J and J^-1 read from `scalar_vector`'s entries."""
     if principal:
-        j = [scalars[1 + i] for i in range(3)]
-        inv = [scalars[4 + i] for i in range(3)]
-        h1, h2, h3 = j[0] * w1, j[1] * w2, j[2] * w3
-        c1, c2, c3 = w2 * h3 - w3 * h2, w3 * h1 - w1 * h3, w1 * h2 - w2 * h1
-        dw = (-c1 * inv[0], -c2 * inv[1], -c3 * inv[2])
+        inertia, inverse = scalars[1:4], scalars[4:7]
     else:
-        j = [[scalars[1 + 3 * r + c] for c in range(3)] for r in range(3)]
-        inv = [[scalars[10 + 3 * r + c] for c in range(3)] for r in range(3)]
-        h1, h2, h3 = (j[r][0] * w1 + j[r][1] * w2 + j[r][2] * w3 for r in range(3))
-        c1, c2, c3 = w2 * h3 - w3 * h2, w3 * h1 - w1 * h3, w1 * h2 - w2 * h1
-        dw = tuple(-(inv[r][0] * c1 + inv[r][1] * c2 + inv[r][2] * c3) for r in range(3))
-    dq = (
-        0.5 * (-q1 * w1 - q2 * w2 - q3 * w3),
-        0.5 * (q0 * w1 + q2 * w3 - q3 * w2),
-        0.5 * (q0 * w2 + q3 * w1 - q1 * w3),
-        0.5 * (q0 * w3 + q1 * w2 - q2 * w1),
-    )
-    return dq + dw
-
-
-def _weighted_rows(coefficients, ks):
-    """sum_j c_j k_j row by row over the non-zero c_j, summed as `unrolled_step` sums; None
-    if every c_j is zero."""
-    terms = [(float(c), k) for c, k in zip(coefficients, ks, strict=True) if float(c) != 0.0]
-    if not terms:
-        return None
-    total = None
-    for c, k in terms:
-        if total is None:
-            total = [c * x for x in k]
-        else:
-            total = [t + c * x for t, x in zip(total, k, strict=True)]
-    return total
+        inertia = [[scalars[1 + 3 * r + c] for c in range(3)] for r in range(3)]
+        inverse = [[scalars[10 + 3 * r + c] for c in range(3)] for r in range(3)]
+    return rotation_rates_rows(inertia, inverse, principal, rows)
 
 
 def stage_increments(tableau, scalars, principal, rows):
@@ -102,26 +74,21 @@ def stage_increments(tableau, scalars, principal, rows):
     dt = scalars[0]
 
     def increment(y):
-        return [dt * r for r in rotation_rates_rows(scalars, principal, y)]
+        return [dt * r for r in _rates(scalars, principal, y)]
 
     ks = [increment(rows)]
     y_stage = rows
     for i in range(1, len(tableau.c) + 1):
-        inc = _weighted_rows(tableau.a_lower[i - 1], ks)
-        y_stage = rows if inc is None else [y + d for y, d in zip(rows, inc, strict=True)]
+        y_stage = combine_increments(rows, tableau.a_lower[i - 1], ks)
         ks.append(increment(y_stage))
-    if tableau.ssal:
-        y1 = y_stage
-    else:
-        inc = _weighted_rows(tableau.b_sol, ks)
-        y1 = [y + d for y, d in zip(rows, inc, strict=True)]
+    y1 = y_stage if tableau.ssal else combine_increments(rows, tableau.b_sol, ks)
     return ks, y1
 
 
 def step_rows(tableau, scalars, principal, rows):
     """One step: (y1 rows, error-estimate rows), as `unrolled_step` computes them."""
     ks, y1 = stage_increments(tableau, scalars, principal, rows)
-    error = _weighted_rows(tableau.b_error, ks)
+    error = weighted_sum(tableau.b_error, ks)
     if error is None:
         error = [jnp.zeros_like(r) for r in rows]
     return tuple(y1), tuple(error)
@@ -139,21 +106,11 @@ def _kernel(tableau, principal, n_scalars):
     return kernel
 
 
-def padded_members(y, total):
-    """`y` (..., N) with its last member repeated to `total` members: the kernel takes whole
-    blocks of `BLOCK` members (Triton does not mask a partial last block's loads and stores
-    here: they reached the neighbouring buffers on an H200)."""
-    pad = total - y.shape[-1]
-    if pad == 0:
-        return y
-    return jnp.pad(y, [(0, 0)] * (y.ndim - 1) + [(0, pad)], mode="edge")
-
-
 def _pallas_step(tableau, principal, interpret, scalars, quat, omega):
     from jax.experimental import pallas as pl  # imported where used: not on every start
 
     n = quat.shape[-1]
-    if n % BLOCK:
+    if n % BLOCK:  # Triton did not mask a partial last block: it ran past the arrays' ends
         raise ValueError(f"the fused step takes whole blocks of {BLOCK} members, got {n}")
 
     def row(r):  # row r of a (rows, N) array, a block of BLOCK members at a time

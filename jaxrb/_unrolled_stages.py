@@ -36,7 +36,7 @@ import jax
 import jax.numpy as jnp
 
 
-def _weighted_sum(coefficients, ks):
+def weighted_sum(coefficients, ks):
     """sum_j c_j k_j over the non-zero c_j (Python floats: the sum keeps the increments'
     dtype), or None if every c_j is zero."""
     terms = [(float(c), k) for c, k in zip(coefficients, ks, strict=True) if float(c) != 0.0]
@@ -52,9 +52,9 @@ def _weighted_sum(coefficients, ks):
     return jax.tree.map(leaf, *[k for _, k in terms])
 
 
-def _combine(y0, coefficients, ks):
+def combine_increments(y0, coefficients, ks):
     """y0 + sum_j c_j k_j over the non-zero c_j."""
-    inc = _weighted_sum(coefficients, ks)
+    inc = weighted_sum(coefficients, ks)
     return y0 if inc is None else jax.tree.map(jnp.add, y0, inc)
 
 
@@ -86,7 +86,7 @@ def unrolled_step(solver, terms, t0, t1, y0, args, solver_state, made_jump):
     f1 = None
     y_stage = y0
     for i in range(1, n_stages):
-        y_stage = _combine(y0, tableau.a_lower[i - 1], ks)
+        y_stage = combine_increments(y0, tableau.a_lower[i - 1], ks)
         c = float(tableau.c[i - 1])
         t_stage = t1 if c == 1.0 else t0 + c * dt  # as diffrax: exactly t1 at c = 1
         if fsal and i == n_stages - 1:
@@ -100,8 +100,8 @@ def unrolled_step(solver, terms, t0, t1, y0, args, solver_state, made_jump):
         # figures above were measured with it.
         ks.append(jax.lax.optimization_barrier(k))
 
-    y1 = y_stage if tableau.ssal else _combine(y0, tableau.b_sol, ks)
-    y_error = _weighted_sum(tableau.b_error, ks)
+    y1 = y_stage if tableau.ssal else combine_increments(y0, tableau.b_sol, ks)
+    y_error = weighted_sum(tableau.b_error, ks)
     if y_error is None:  # a tableau without an error estimate
         y_error = jax.tree.map(jnp.zeros_like, y0)
     k_stacked = jax.tree.map(lambda *k: jnp.stack(k), *ks)
