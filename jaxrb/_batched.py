@@ -25,7 +25,7 @@ import numpy as np
 
 from ._checks import as_computed, is_concrete
 from ._coordinates import ROTATION, coordinates_for
-from ._fused_rotation_step import BLOCK, fused_rotation_solver, on_gpu
+from ._fused_rotation_step import BLOCK, fused_rotation_solver, member_rows, on_gpu
 from ._inputs import check_concrete_inputs, input_result, safe_times
 from ._persistent import entry_point
 from ._results import RESULTS, raise_if_failed
@@ -152,8 +152,8 @@ def simulate_batched(scene, states0, ts, settings, batched_scene=False, part=Non
 def _solve_part(scene, states0, ts, settings, batched_scene):
     """One solve of all members of `states0` (see `simulate_batched`). Off a CPU, an explicit
     Runge-Kutta solver takes its steps with the stages written out (`batch_solver`); on a
-    GPU, for the free rotation of bodies sharing one scene, each step is one kernel
-    (`_fused_rotation_step.py`)."""
+    GPU, for the free rotation of bodies sharing one scene or each with its own inertia
+    (`batched_scene`), each step is one kernel (`_fused_rotation_step.py`)."""
     coords = coordinates_for(scene)
     scene_axes = 0 if batched_scene else None
     dtype = ts.dtype
@@ -189,17 +189,30 @@ def _solve_part(scene, states0, ts, settings, batched_scene):
         batch_rates = jax.vmap(member_rates, in_axes=(scene_axes, None, -1, 0, 0), out_axes=-1)
     else:
         batch_rates = lambda scene_, t, y, *_: coords.member_last_rates(scene_, y)  # noqa: E731
-    one_kernel = on_gpu() and not masked  # a step as one kernel: shared free rotation, a GPU
-    fused = fused_rotation_solver(settings.solver, rates_scene.body) if one_kernel else None
+    n = states0.pos.shape[0]
+    blocks = -(-n // BLOCK) * BLOCK  # whole kernel blocks: the last member repeated
+    fused = None
+    if on_gpu() and coords is ROTATION:  # a step as one kernel (free rotation, a GPU)
+        if batched_scene:  # each member's J, J^-1 and validity as rows beside its state
+            body = scene.body
+            inverse = jax.vmap(lambda b: b.with_inertia_inverse().inertia_inverse)(body)
+            rows = member_rows(body.inertia, inverse, valid)
+            rows = _padded(rows.T, blocks).T
+            fused = fused_rotation_solver(settings.solver, body, members=rows)
+        else:
+            fused = fused_rotation_solver(settings.solver, rates_scene.body)
     solver = batch_solver(settings.solver) if fused is None else fused
     settings = eqx.tree_at(lambda s: s.solver, settings, solver)
-    n = states0.pos.shape[0]
-    solved = states0
-    if fused is not None:  # whole kernel blocks: the last member repeated (the same error)
-        solved = jax.tree.map(lambda x: _padded(x, -(-n // BLOCK) * BLOCK), states0)
-    y0 = jax.vmap(coords.reduce, in_axes=(scene_axes, 0), out_axes=-1)(scene, solved)
+    # the members the solve integrates, padded to whole kernel blocks for the fused step
+    # (the copies' error is the last member's: the step control is unchanged)
+    per_member = (states0, valid) + ((scene, rates_scene) if batched_scene else ())
+    if fused is not None:
+        per_member = jax.tree.map(lambda x: _padded(x, blocks), per_member)
+    solved_states, solved_valid = per_member[:2]
+    solved_scene, solved_rates_scene = per_member[2:] if batched_scene else (scene, rates_scene)
+    y0 = jax.vmap(coords.reduce, in_axes=(scene_axes, 0), out_axes=-1)(solved_scene, solved_states)
     ys, num_steps, solver_result = solve(
-        lambda t, y: batch_rates(rates_scene, t, y, states0, valid),
+        lambda t, y: batch_rates(solved_rates_scene, t, y, solved_states, solved_valid),
         y0,
         run_ts,
         settings,
@@ -256,8 +269,10 @@ def simulate_batch(
     - `solver`: any diffrax solver; default as `simulate` for a batch: `diffrax.Dopri8()`
       below rtol 1e-5 (and for a traced rtol), else `diffrax.Tsit5()`. Off a CPU a
       `Tsit5`, `Dopri5` or `Dopri8` takes its steps with the stages written out (the same
-      method and steps; `jaxrb/_unrolled_stages.py`); on a GPU, for free bodies sharing one
-      scene, each step is one kernel (`jaxrb/_fused_rotation_step.py`).
+      method and steps; `jaxrb/_unrolled_stages.py`); on a GPU, for torque-free bodies
+      sharing one scene or each with its own inertia (`batched_scene`), each step is one
+      kernel (`jaxrb/_fused_rotation_step.py`; the per-member kernel is checked on the CPU in
+      Pallas's interpreter, its speed not yet measured on a GPU).
     - `adjoint`: as `simulate`: reverse mode by default, `diffrax.ForwardMode()` for forward
       mode.
     - `batched_scene`: see `scene`.

@@ -22,8 +22,11 @@ reverse mode (diffrax's adjoints) differentiate the identical arithmetic, at the
 running the step in XLA as well. The dense output's increments (saves between the end
 points) come from the same jax.numpy stages; XLA drops them where nothing reads them.
 
-Used for the torque-free rotation of a batch sharing one body (the B1 problem) on a GPU;
-elsewhere the written-out stages serve (`batch_solver`). B1 at N = 1e6 on an NVIDIA H200,
+Used for the torque-free rotation of a batch on a GPU: members sharing one body (the B1
+problem; J and J^-1 are kernel scalars), or each with its own inertia (`batched_scene`, an
+inertia sweep: J, J^-1 and a validity flag are rows beside the state's, `member_rows`; a
+flagged member's rates are zero, as on the masked path); elsewhere the written-out stages
+serve (`batch_solver`). B1 at N = 1e6 on an NVIDIA H200,
 Dopri8 at tol 5e-10 in float64 (error 6.3e-9): 0.035 us per body against 0.24 with the
 stages written out (benchmarks/README.md, "a step as one kernel").
 
@@ -58,23 +61,45 @@ def scalar_vector(dt, body, dtype) -> jax.Array:
     return jnp.pad(values, (0, size - values.shape[0]))
 
 
-def _rates(scalars, principal: bool, rows):
-    """`rotation_rates_rows` with J and J^-1 read from `scalar_vector`'s entries."""
+def member_rows(inertia, inverse, valid) -> jax.Array:
+    """The kernel's per-member rows, one column per member: J's and J^-1's entries (principal
+    moments (N, 3): 3 + 3 rows; full tensors (N, 3, 3): 9 + 9, row-major) and last the
+    member's validity (1 or 0), all in J's dtype."""
+    n = inertia.shape[0]
+    flag = valid.astype(inertia.dtype)[None]
+    return jnp.concatenate(
+        [inertia.reshape(n, -1).T, inverse.reshape(n, -1).astype(inertia.dtype).T, flag]
+    )
+
+
+def _entries(values, principal: bool):
+    """J or J^-1 from its entries in order: the 3 moments, or nested [r][c] of 9."""
     if principal:
-        inertia, inverse = scalars[1:4], scalars[4:7]
-    else:
-        inertia = [[scalars[1 + 3 * r + c] for c in range(3)] for r in range(3)]
-        inverse = [[scalars[10 + 3 * r + c] for c in range(3)] for r in range(3)]
-    return rotation_rates_rows(inertia, inverse, principal, rows)
+        return values[:3]
+    return [[values[3 * r + c] for c in range(3)] for r in range(3)]
 
 
-def stage_increments(tableau, scalars, principal, rows):
+def _rates(scalars, principal: bool, rows, members=None):
+    """`rotation_rates_rows` with J and J^-1 read from `scalar_vector`'s entries, or per
+    member from `member_rows`' rows (a flagged member's rates zero)."""
+    size = 3 if principal else 9
+    values = scalars[1:] if members is None else members
+    inertia = _entries(values[:size], principal)
+    inverse = _entries(values[size : 2 * size], principal)
+    rates = rotation_rates_rows(inertia, inverse, principal, rows)
+    if members is None:
+        return rates
+    valid = members[2 * size]
+    return tuple(jnp.where(valid != 0, r, jnp.zeros_like(r)) for r in rates)
+
+
+def stage_increments(tableau, scalars, principal, rows, members=None):
     """Every stage's increment k_i = dt f(Y_i) (a list over the stages of 7 rows each) and
     y1's rows."""
     dt = scalars[0]
 
     def increment(y):
-        return [dt * r for r in _rates(scalars, principal, y)]
+        return [dt * r for r in _rates(scalars, principal, y, members)]
 
     ks = [increment(rows)]
     y_stage = rows
@@ -85,28 +110,29 @@ def stage_increments(tableau, scalars, principal, rows):
     return ks, y1
 
 
-def step_rows(tableau, scalars, principal, rows):
+def step_rows(tableau, scalars, principal, rows, members=None):
     """One step: (y1 rows, error-estimate rows), as `unrolled_step` computes them."""
-    ks, y1 = stage_increments(tableau, scalars, principal, rows)
+    ks, y1 = stage_increments(tableau, scalars, principal, rows, members)
     error = weighted_sum(tableau.b_error, ks)
     if error is None:
         error = [jnp.zeros_like(r) for r in rows]
     return tuple(y1), tuple(error)
 
 
-def _kernel(tableau, principal, n_scalars):
+def _kernel(tableau, principal, n_scalars, n_members):
     def kernel(scalars_ref, *refs):
-        inputs, outputs = refs[:7], refs[7:]
+        inputs, outputs = refs[: 7 + n_members], refs[7 + n_members :]
         scalars = [scalars_ref[i] for i in range(n_scalars)]
         rows = [ref[...] for ref in inputs]
-        y1, error = step_rows(tableau, scalars, principal, rows)
+        members = rows[7:] if n_members else None
+        y1, error = step_rows(tableau, scalars, principal, rows[:7], members)
         for ref, value in zip(outputs, y1 + error, strict=True):
             ref[...] = value
 
     return kernel
 
 
-def _pallas_step(tableau, principal, interpret, scalars, quat, omega):
+def _pallas_step(tableau, principal, interpret, scalars, quat, omega, members=None):
     from jax.experimental import pallas as pl  # imported where used: not on every start
 
     n = quat.shape[-1]
@@ -117,13 +143,15 @@ def _pallas_step(tableau, principal, interpret, scalars, quat, omega):
         return pl.BlockSpec((None, BLOCK), lambda i: (r, i))
 
     row_specs = [row(r) for r in range(4)] + [row(r) for r in range(3)]  # quat, then omega
+    n_members = 0 if members is None else members.shape[0]
+    row_specs += [row(r) for r in range(n_members)]  # per-member J, J^-1, validity
     compiler_params = None
     if not interpret:
         from jax.experimental.pallas import triton as pl_triton
 
         compiler_params = pl_triton.CompilerParams(num_warps=NUM_WARPS)
     outs = pl.pallas_call(
-        _kernel(tableau, principal, scalars.shape[0]),
+        _kernel(tableau, principal, scalars.shape[0], n_members),
         grid=(n // BLOCK,),
         in_specs=[pl.BlockSpec(scalars.shape, lambda i: (0,))] + row_specs,
         out_specs=[pl.BlockSpec((BLOCK,), lambda i: (i,))] * 14,
@@ -131,7 +159,7 @@ def _pallas_step(tableau, principal, interpret, scalars, quat, omega):
         interpret=interpret,
         compiler_params=compiler_params,
         name="fused_rotation_step",
-    )(scalars, quat, quat, quat, quat, omega, omega, omega)
+    )(scalars, quat, quat, quat, quat, omega, omega, omega, *[members] * n_members)
     return _as_coordinates(outs[:7]), _as_coordinates(outs[7:])
 
 
@@ -139,15 +167,17 @@ def _as_coordinates(rows):
     return jnp.stack(rows[:4]), jnp.stack(rows[4:])
 
 
-def _xla_step(tableau, principal, scalars, quat, omega):
+def _xla_step(tableau, principal, scalars, quat, omega, members=None):
     rows = list(quat) + list(omega)
-    y1, error = step_rows(tableau, scalars, principal, rows)
+    y1, error = step_rows(tableau, scalars, principal, rows, members)
     return _as_coordinates(y1), _as_coordinates(error)
 
 
 fused_step = jax.custom_jvp(_pallas_step, nondiff_argnums=(0, 1, 2))
-"""(tableau, principal, interpret, scalars, quat, omega) -> ((quat1, omega1), (quat_err,
-omega_err)): one step by the kernel, differentiable through the same step in jax.numpy."""
+"""(tableau, principal, interpret, scalars, quat, omega, members=None) -> ((quat1, omega1),
+(quat_err, omega_err)): one step by the kernel, differentiable through the same step in
+jax.numpy. `members`: `member_rows` (each member's J, J^-1 and validity), or None for
+J and J^-1 among the scalars."""
 
 
 @fused_step.defjvp
@@ -159,16 +189,22 @@ def _fused_step_jvp(tableau, principal, interpret, primals, tangents):
 
 class _FusedRotation:
     """The `step` of the fused solvers: diffrax's method, its step one kernel (see the module
-    docstring). `body` carries J and the cached J^-1; `interpret`: run the kernel in Pallas's
-    interpreter (any backend; for tests)."""
+    docstring). `body` carries J and the cached J^-1, or, with `members` (`member_rows`, a
+    column per member), only whether J is principal; `interpret`: run the kernel in
+    Pallas's interpreter (any backend; for tests)."""
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         del terms, args, made_jump
         quat, omega = y0
-        scalars = scalar_vector(t1 - t0, self.body, omega.dtype)
+        members, principal = self.members, self.body.principal
+        if members is None:
+            scalars = scalar_vector(t1 - t0, self.body, omega.dtype)
+        else:  # dt alone, padded as `scalar_vector` pads
+            scalars = jnp.pad(jnp.reshape(t1 - t0, (1,)).astype(omega.dtype), (0, 7))
         tableau = self.tableau
-        y1, y_error = fused_step(tableau, self.body.principal, self.interpret, scalars, quat, omega)
-        ks, _ = stage_increments(tableau, scalars, self.body.principal, list(quat) + list(omega))
+        y1, y_error = fused_step(tableau, principal, self.interpret, scalars, quat, omega, members)
+        rows = list(quat) + list(omega)
+        ks, _ = stage_increments(tableau, scalars, principal, rows, members)
         k_stacked = (
             jnp.stack([jnp.stack(k[:4]) for k in ks]),
             jnp.stack([jnp.stack(k[4:]) for k in ks]),
@@ -182,6 +218,7 @@ class _FusedRotation:
 def _fused_class(base):
     class Fused(_FusedRotation, base):
         body: object = None
+        members: jax.Array | None = None
         interpret: bool = eqx.field(static=True, default=False)
 
     Fused.__name__ = Fused.__qualname__ = f"FusedRotation{base.__name__}"
@@ -196,11 +233,13 @@ def on_gpu() -> bool:
     return jax.default_backend() == "gpu"
 
 
-def fused_rotation_solver(solver, body, interpret: bool = False):
+def fused_rotation_solver(solver, body, interpret: bool = False, members=None):
     """The fused twin of a `diffrax.Tsit5`, `Dopri5` or `Dopri8` (its exact class) for the
-    torque-free rotation of `body` (J^-1 cached: `RigidBody.with_inertia_inverse`), or None
-    for any other solver."""
+    torque-free rotation of `body` (J^-1 cached: `RigidBody.with_inertia_inverse`), or of
+    members each with its own inertia (`members`: `member_rows`, one column per member, the
+    batch padded to whole blocks; `body` then only says whether J is principal); None for
+    any other solver."""
     fused = _FUSED.get(type(solver))
     if fused is None:
         return None
-    return fused(scan_kind=solver.scan_kind, body=body, interpret=interpret)
+    return fused(scan_kind=solver.scan_kind, body=body, members=members, interpret=interpret)
