@@ -204,12 +204,14 @@ def _solve_part(scene, states0, ts, settings, batched_scene):
     solver = batch_solver(settings.solver) if fused is None else fused
     settings = eqx.tree_at(lambda s: s.solver, settings, solver)
     # the members the solve integrates, padded to whole kernel blocks for the fused step
-    # (the copies' error is the last member's: the step control is unchanged)
-    per_member = (states0, valid) + ((scene, rates_scene) if batched_scene else ())
+    # (the copies' error is the last member's: the step control is unchanged); a batched
+    # scene is its own rates' scene (masked)
+    solved_states, solved_valid, solved_scene = states0, valid, scene
     if fused is not None:
-        per_member = jax.tree.map(lambda x: _padded(x, blocks), per_member)
-    solved_states, solved_valid = per_member[:2]
-    solved_scene, solved_rates_scene = per_member[2:] if batched_scene else (scene, rates_scene)
+        pad = lambda tree: jax.tree.map(lambda x: _padded(x, blocks), tree)  # noqa: E731
+        solved_states, solved_valid = pad((states0, valid))
+        solved_scene = pad(scene) if batched_scene else scene
+    solved_rates_scene = solved_scene if batched_scene else rates_scene
     y0 = jax.vmap(coords.reduce, in_axes=(scene_axes, 0), out_axes=-1)(solved_scene, solved_states)
     ys, num_steps, solver_result = solve(
         lambda t, y: batch_rates(solved_rates_scene, t, y, solved_states, solved_valid),

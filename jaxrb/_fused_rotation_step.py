@@ -47,17 +47,17 @@ BLOCK = 128
 NUM_WARPS = 4
 
 
-def scalar_vector(dt, body, dtype) -> jax.Array:
+def scalar_vector(dt, body, dtype, per_member: bool = False) -> jax.Array:
     """The kernel's scalars as one vector: dt (s), then J and J^-1 (principal: 3 + 3 values;
-    full: 9 + 9, row-major), zero-padded to a power of two (8 or 32) for Triton."""
-    inertia = body.inertia.astype(dtype)
-    inverse = body.inertia_inverse
-    if inverse is None:
-        raise ValueError("the fused rotation step needs the body's cached J^-1")
-    values = jnp.concatenate(
-        [jnp.reshape(dt, (1,)).astype(dtype), inertia.ravel(), inverse.astype(dtype).ravel()]
-    )
-    size = 8 if body.principal else 32
+    full: 9 + 9, row-major), zero-padded to a power of two (8 or 32) for Triton. With
+    `per_member` (J and J^-1 in `member_rows`), dt alone, padded to 8; `body` is not read."""
+    values = [jnp.reshape(dt, (1,)).astype(dtype)]
+    if not per_member:
+        if body.inertia_inverse is None:
+            raise ValueError("the fused rotation step needs the body's cached J^-1")
+        values += [body.inertia.astype(dtype).ravel(), body.inertia_inverse.astype(dtype).ravel()]
+    values = jnp.concatenate(values)
+    size = 8 if per_member or body.principal else 32
     return jnp.pad(values, (0, size - values.shape[0]))
 
 
@@ -197,10 +197,7 @@ class _FusedRotation:
         del terms, args, made_jump
         quat, omega = y0
         members, principal = self.members, self.body.principal
-        if members is None:
-            scalars = scalar_vector(t1 - t0, self.body, omega.dtype)
-        else:  # dt alone, padded as `scalar_vector` pads
-            scalars = jnp.pad(jnp.reshape(t1 - t0, (1,)).astype(omega.dtype), (0, 7))
+        scalars = scalar_vector(t1 - t0, self.body, omega.dtype, members is not None)
         tableau = self.tableau
         y1, y_error = fused_step(tableau, principal, self.interpret, scalars, quat, omega, members)
         rows = list(quat) + list(omega)

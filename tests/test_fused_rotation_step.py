@@ -170,7 +170,7 @@ def test_the_per_member_step_and_its_inertia_derivative(full):
     inertia, inverse = _member_inertias(BLOCK, full)
     valid = jnp.ones(BLOCK, bool).at[5].set(False)
     rows = member_rows(inertia, inverse, valid)
-    dt = jnp.pad(jnp.array([0.05]), (0, 7))
+    dt = scalar_vector(0.05, None, jnp.float64, per_member=True)
     tableau = dfx.Dopri8().tableau
     got = fused_step(tableau, not full, True, dt, quat, omega, rows)
     want = _xla_step(tableau, not full, dt, quat, omega, rows)
@@ -328,7 +328,7 @@ def test_the_kernel_lowers_to_triton(inertia):
         jnp.broadcast_to(body.inertia_inverse, (2 * BLOCK,) + body.inertia.shape),
         jnp.ones(2 * BLOCK, bool),
     )
-    dt = jnp.pad(jnp.array([0.1]), (0, 7))
+    dt = scalar_vector(0.1, None, jnp.float64, per_member=True)
 
     def per_member(dt, quat, omega, rows):
         return fused_step(dfx.Dopri8().tableau, body.principal, False, dt, quat, omega, rows)
