@@ -18,6 +18,12 @@ with respect to every omega0 (100 checkpoints), both ways, and its agreement bet
 
     python -m benchmarks.b1_fused --n 1000000 --out bench_out      # on a GPU
     python -m benchmarks.b1_fused --plot bench_out/b1_fused.json   # its picture, anywhere
+    python -m benchmarks.b1_fused --per-member --n 1000000 --out bench_out   # an inertia sweep
+
+With `--per-member`, an inertia sweep instead: each member its own principal moments about
+(1, 2, 3) (`member_inertias`), `jaxrb.simulate_batch(..., batched_scene=True)` against the
+stages written out, the error against each member's exact flow, and the reverse gradient
+with respect to every member's J (`b1_fused_per_member.json` and `.png`).
 
 On a CPU the fused step is not used by `simulate` (its kernel is Triton's); this script then
 says so and stops.
@@ -57,6 +63,10 @@ ROWS = (  # (dtype, solver name, tolerances)
 )
 GRAD_TOL = 5e-10
 CHECKPOINTS = 100
+PER_MEMBER_ROWS = (  # `--per-member`: an inertia sweep, one J per member
+    ("float64", "Dopri8", (1e-8, 1e-9, 1e-10)),
+    ("float32", "Dopri8", (1e-6,)),
+)
 
 
 def _solvers(name):
@@ -88,18 +98,51 @@ def solve_rows(n):
                 )
             )
             for i, tol in enumerate(tols):
-                first, best, traj = C.time_jax(fn, states0, jnp.asarray(tol, dtype))
-                row = dict(
-                    method=f"{way}, {solver_name}",
-                    dtype=dname,
-                    tol=tol,
-                    error=error(traj.states.omega[:, -1], traj.states.quat[:, -1]),
-                    us_per_body=best / n * 1e6,
-                    compile_s=first - best if i == 0 else None,
-                    steps=int(traj.num_steps[0]),
-                )
-                print(json.dumps(row), flush=True)
-                rows.append(row)
+                timed = C.time_jax(fn, states0, jnp.asarray(tol, dtype))
+                rows.append(_row(timed, n, f"{way}, {solver_name}", dname, tol, error, i == 0))
+    return rows
+
+
+def _row(timed, n, method, dname, tol, error, compiled):
+    """A solve's row from `C.time_jax`'s (first, best, trajectory); its compile time where
+    `compiled` (the first call of its program)."""
+    first, best, traj = timed
+    row = dict(
+        method=method,
+        dtype=dname,
+        tol=tol,
+        error=error(traj.states.omega[:, -1], traj.states.quat[:, -1]),
+        us_per_body=best / n * 1e6,
+        compile_s=first - best if compiled else None,
+        steps=int(traj.num_steps[0]),
+    )
+    print(json.dumps(row), flush=True)
+    return row
+
+
+def reverse_gradient_rows(loss_with, x, n, what):
+    """Rows of the reverse gradient of `loss_with(solver)` at `x` (n bodies), Dopri8 fused
+    and written out, and their agreement (largest entry's relative difference)."""
+    rows, grads = [], {}
+    for way, solver in _solvers("Dopri8").items():
+        first, best, grads[way] = C.time_jax(jax.jit(jax.grad(loss_with(solver))), x)
+        row = dict(
+            method=f"{way}, Dopri8: reverse gradient w.r.t. {what} ({CHECKPOINTS} checkpoints)",
+            dtype="float64",
+            tol=GRAD_TOL,
+            us_per_body=best / n * 1e6,
+            compile_s=first - best,
+        )
+        print(json.dumps(row), flush=True)
+        rows.append(row)
+    a, b = grads["fused"], grads["written out"]
+    agree = float(jnp.max(jnp.abs(a - b)) / jnp.max(jnp.abs(b)))
+    print(json.dumps(dict(gradient_relative_difference=agree)), flush=True)
+    rows.append(
+        dict(
+            method=f"gradients w.r.t. {what}, fused against written out", relative_difference=agree
+        )
+    )
     return rows
 
 
@@ -109,10 +152,9 @@ def gradient_rows(n):
     ts = jnp.array([0.0, T_END])
     weights = jax.random.normal(jax.random.key(0), (n, 7))
     adjoint = dfx.RecursiveCheckpointAdjoint(CHECKPOINTS)
-    rows, grads = [], {}
-    for way, solver in _solvers("Dopri8").items():
 
-        def loss(w, solver=solver):
+    def loss_with(solver):
+        def loss(w):
             traj = jaxrb.simulate(
                 scene,
                 jaxrb.make_state(omega=w),
@@ -126,26 +168,77 @@ def gradient_rows(n):
             final = jnp.concatenate([traj.states.quat[:, -1], traj.states.omega[:, -1]], -1)
             return jnp.sum(weights * final)
 
-        first, best, grads[way] = C.time_jax(jax.jit(jax.grad(loss)), omega0)
-        row = dict(
-            method=f"{way}, Dopri8: reverse gradient w.r.t. all omega0 ({CHECKPOINTS} checkpoints)",
-            dtype="float64",
-            tol=GRAD_TOL,
-            us_per_body=best / n * 1e6,
-            compile_s=first - best,
-        )
-        print(json.dumps(row), flush=True)
-        rows.append(row)
-    a, b = grads["fused"], grads["written out"]
-    agree = float(jnp.max(jnp.abs(a - b)) / jnp.max(jnp.abs(b)))
-    print(json.dumps(dict(gradient_relative_difference=agree)), flush=True)
-    rows.append(dict(method="gradients, fused against written out", relative_difference=agree))
-    return rows
+        return loss
+
+    return reverse_gradient_rows(loss_with, omega0, n, "all omega0")
+
+
+def member_inertias(n, seed=1):
+    """(N, 3) principal moments (kg m^2), each member's own, about B1's (1, 2, 3): J1 in
+    [1, 1.1], J2 in [2, 2.2], J3 in [2.7, 3] (so J1 + J2 >= J3)."""
+    u = jax.random.uniform(jax.random.key(seed), (n, 3), dtype=jnp.float64)
+    return jnp.asarray(INERTIA) * (1 + jnp.array([0.1, 0.1, -0.1]) * u)
+
+
+def _member_scene(inertia, dtype):
+    n = inertia.shape[0]
+    return jaxrb.Scene(jaxrb.RigidBody(jnp.ones(n, dtype), inertia.astype(dtype), principal=True))
+
+
+def per_member_rows(n, grad_n):
+    """An inertia sweep: `simulate_batch(..., batched_scene=True)`, each member with its own
+    J (on a GPU each step one kernel with every member's J and J^-1 beside its state), against
+    the stages written out; its error against each member's exact flow; and the reverse
+    gradient of a weighted sum of the final omegas with respect to every member's J."""
+    omega0, inertia = initial_omegas(n), member_inertias(n)
+    flow = jax.jit(
+        jax.vmap(lambda J, w: jaxrb.torque_free_flow(J, jaxrb.make_state(omega=w), T_END))
+    )(inertia, omega0)
+    unit = flow.quat / jnp.linalg.norm(flow.quat, axis=-1, keepdims=True)
+    error = error_against(flow.omega, unit, omega0)
+    rows = []
+    for dname, solver_name, tols in PER_MEMBER_ROWS:
+        dtype = jnp.dtype(dname)
+        scene = _member_scene(inertia, dtype)
+        states0 = jaxrb.make_state(omega=omega0.astype(dtype))
+        ts = jnp.array([0.0, T_END], dtype)
+        for way, solver in _solvers(solver_name).items():
+            for i, tol in enumerate(tols):
+
+                def run(scene, states0, solver=solver, ts=ts, tol=tol):
+                    return jaxrb.simulate_batch(
+                        scene, states0, ts, solver=solver, rtol=tol, atol=tol,
+                        max_steps=10**5, batched_scene=True, throw=False,
+                    )  # fmt: skip
+
+                method = f"{way}, {solver_name}, one J per member"
+                timed = C.time_jax(run, scene, states0)
+                rows.append(_row(timed, n, method, dname, tol, error, i == 0))
+    if not grad_n:
+        return rows
+    omega0, inertia = initial_omegas(grad_n), member_inertias(grad_n)
+    states0, ts = jaxrb.make_state(omega=omega0), jnp.array([0.0, T_END])
+    weights = jax.random.normal(jax.random.key(2), (grad_n, 3))
+    adjoint = dfx.RecursiveCheckpointAdjoint(CHECKPOINTS)
+
+    def loss_with(solver):
+        def loss(inertia):
+            traj = jaxrb.simulate_batch(
+                _member_scene(inertia, jnp.float64), states0, ts, solver=solver,
+                rtol=GRAD_TOL, atol=GRAD_TOL, adjoint=adjoint, batched_scene=True,
+                throw=False,
+            )  # fmt: skip
+            return jnp.sum(weights * traj.states.omega[:, -1])
+
+        return loss
+
+    return rows + reverse_gradient_rows(loss_with, inertia, grad_n, "every member's J")
 
 
 def plot(results_path):
-    """Work against precision of a saved run (`b1_fused.json`): error against us per body,
-    one line per method and dtype; written beside it as `b1_fused.png`."""
+    """Work against precision of a saved run (`b1_fused.json`, `b1_fused_per_member.json`):
+    error against us per body, one line per method and dtype; written beside it, the same
+    name ending in `.png`."""
     with open(results_path) as f:
         saved = json.load(f)
     rows = [
@@ -163,8 +256,9 @@ def plot(results_path):
         for r in saved["rows"]
         if "error" in r
     ]
-    path = os.path.join(os.path.dirname(results_path), "b1_fused.png")
-    title = f"B1, N = {saved['n']:.0e}, one solve: a step as one kernel ({saved['device']})"
+    path = os.path.splitext(results_path)[0] + ".png"
+    sweep = ", one J per member" if results_path.endswith("_per_member.json") else ""
+    title = f"B1{sweep}, N = {saved['n']:.0e}, one solve: a step as one kernel ({saved['device']})"
     C.plot_work_precision(rows, title, path)
     print(f"wrote {os.path.abspath(path)}")
 
@@ -177,6 +271,9 @@ def main():
     p.add_argument("--out", default="bench_out")
     p.add_argument("--force", action="store_true")
     p.add_argument("--plot", metavar="JSON", help="only draw a saved run's picture")
+    p.add_argument(
+        "--per-member", action="store_true", help="an inertia sweep instead (one J per member)"
+    )
     a = p.parse_args()
     if a.plot:
         plot(a.plot)
@@ -185,12 +282,16 @@ def main():
         print("b1_fused: no GPU here; simulate does not use the fused step on a CPU")
         return
     name = "b1_fused_gradient.json" if a.no_solve else "b1_fused.json"
-    (path,) = C.output_paths(p, a.out, [name], a.force)
+    name = "b1_fused_per_member.json" if a.per_member else name
+    picture = [] if a.no_solve else [name.replace(".json", ".png")]
+    path, *_ = C.output_paths(p, a.out, [name, *picture], a.force)
     device = C.device_name()
     print(f"device {device}, jax {jax.__version__}, N = {a.n}", flush=True)
-    rows = [] if a.no_solve else solve_rows(a.n)
-    if a.grad_n:
-        rows += gradient_rows(a.grad_n)
+    if a.per_member:
+        rows = per_member_rows(a.n, a.grad_n)
+    else:
+        rows = [] if a.no_solve else solve_rows(a.n)
+        rows += gradient_rows(a.grad_n) if a.grad_n else []
     with open(path, "w") as f:
         json.dump(dict(device=device, n=a.n, grad_n=a.grad_n, rows=rows), f, indent=1)
     print(f"wrote {os.path.abspath(path)}")

@@ -42,6 +42,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 import diffrax as dfx
 import jax.numpy as jnp
+import optimistix as optx
 import jaxrb
 jaxrb.speed_up_compilation(cache=False)
 CASE = sys.argv[1]
@@ -63,7 +64,52 @@ def plain(w, ts):
 def ours(w, ts):
     return jaxrb.simulate(scene, jaxrb.make_state(omega=w), ts).states.omega[-1]
 
-if CASE.startswith("die"):
+def replace(module, name, value):  # a part of the contact program left out (attribution)
+    assert hasattr(module, name), (module, name)
+    setattr(module, name, value)
+
+if CASE in ("die_no_choice", "die_no_event", "die_no_rows"):
+    from jaxrb.contact import _driver, _modes, _select, _transition
+    if CASE == "die_no_choice":  # the mode after an event: the one before it
+        replace(_transition, "select_mode", lambda t, state, geom, old, *rest, **kw: _select.Choice(
+            mode=old, consistent=jnp.array(True), painleve=jnp.array(False),
+            ambiguous=jnp.array(False)))
+    else:  # an event changes nothing (no impact law, no mode choice, no projection)
+        def no_event(t, y, mode, trigger, scene, model, tol, live=True):
+            zero, no = jnp.zeros((), y.pos.dtype), jnp.array(False)
+            return _transition.EventOutcome(
+                state=y, mode=mode, impact=no, impulse=jnp.zeros(3, zero.dtype),
+                point=jnp.zeros(3, zero.dtype), speed=zero, energy_lost=zero, merged=no,
+                rest_time=zero + jnp.inf, guarded=no, inconsistent=no, painleve=no,
+                ambiguous=no, energy_rise=zero, penetration=zero)
+        replace(_driver, "at_event", no_event)
+    if CASE == "die_no_rows":  # and a mode's solve has no contact rows
+        replace(_modes, "mode_rows", lambda state, *rest, **kw: _modes.no_rows(state.pos.dtype))
+
+if CASE == "die_plain":  # the least an event-driven die could be: one flight to the floor
+    from jaxrb._scene_file import default_scene_path, load_scene
+    spec = load_scene(default_scene_path())
+    corners = jnp.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)]) * 0.008
+
+    def die_rates(t, y, args):
+        state = jaxrb.State(*y)
+        acc, omega_dot = jaxrb.accelerations(t, state, spec.scene)
+        return (state.vel, jaxrb.quat_rate(state.quat, state.omega), acc, omega_dot)
+
+    def lowest(t, y, args, **kwargs):  # the lowest corner's height (m)
+        return jnp.min(y[0][2] + corners @ jaxrb.quat_to_matrix(y[1])[2])
+
+    def flight(s):
+        sol = dfx.diffeqsolve(
+            dfx.ODETerm(die_rates), dfx.Tsit5(), spec.ts[0], spec.ts[-1], None,
+            (s.pos, s.quat, s.vel, s.omega), saveat=dfx.SaveAt(ts=spec.ts),
+            stepsize_controller=dfx.PIDController(rtol=1e-6, atol=1e-6),
+            event=dfx.Event(lowest, root_finder=optx.Newton(1e-10, 1e-10)), max_steps=100_000,
+        )
+        return sol.ys, sol.event_mask
+
+    fn, args = flight, (spec.state0,)
+elif CASE.startswith("die"):
     from jaxrb._scene_file import default_scene_path, load_scene, make_solver
     spec = load_scene(default_scene_path())
     kwargs = dict(spec.options, solver=make_solver(spec.options["solver"]), throw=False)
@@ -97,6 +143,17 @@ CASES = [
     ("die", None, "default die scene: first `simulate`", "<= 4 s"),
 ]
 
+# `--parts`: where the die's first call goes. The same call with parts of the contact
+# program left out (what those programs compute is wrong; only their size counts), and a
+# plain diffrax solve of the die's flight to its first touch of the floor (an event), the
+# least an event-driven die could compile to
+PARTS = [
+    ("die_no_choice", None, "  die, the mode after an event the one before (no mode choice)", ""),
+    ("die_no_event", None, "  die, an event changes nothing (no impact law, no mode choice)", ""),
+    ("die_no_rows", None, "  die, as above and no contact rows (flight, conditions, roots)", ""),
+    ("die_plain", None, "  plain diffrax: the die's flight to the floor, one event", ""),
+]
+
 
 def measure(case: str) -> dict:
     """One cold first call in a fresh process (no caches): its stages (s) and size."""
@@ -115,13 +172,15 @@ def main(argv=None):
     p.add_argument("--out", default="bench_out")
     p.add_argument("--rounds", type=int, default=3, help="processes per case (alternating)")
     p.add_argument("--force", action="store_true", help="overwrite earlier results")
+    p.add_argument("--parts", action="store_true", help="also the die with parts left out")
     a = p.parse_args(argv)
+    cases = CASES + (PARTS if a.parts else [])
     if a.rounds < 1:
         p.error("--rounds must be >= 1")
     (path,) = C.output_paths(p, a.out, ["first_calls.md"], a.force)
     results = {}
     for r in range(a.rounds):
-        for ours, peer, _, _ in CASES:
+        for ours, peer, _, _ in cases:
             for case in filter(None, (ours, peer) if r % 2 == 0 else (peer, ours)):
                 m = measure(case)
                 results.setdefault(case, []).append(m)
@@ -142,7 +201,7 @@ def main(argv=None):
         "| call | trace (s) | lower (s) | XLA compile (s) | total (s) | HLO lines | target | median ratio to plain diffrax |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    for ours, peer, label, target in CASES:
+    for ours, peer, label, target in cases:
         for case, name in ((ours, label), (peer, "  plain diffrax, the same")):
             if case is None:
                 continue
