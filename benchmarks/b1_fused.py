@@ -19,11 +19,14 @@ with respect to every omega0 (100 checkpoints), both ways, and its agreement bet
     python -m benchmarks.b1_fused --n 1000000 --out bench_out      # on a GPU
     python -m benchmarks.b1_fused --plot bench_out/b1_fused.json   # its picture, anywhere
     python -m benchmarks.b1_fused --per-member --n 1000000 --out bench_out   # an inertia sweep
+    python -m benchmarks.b1_fused --extras --n 1000000 --out bench_out       # the rest
 
 With `--per-member`, an inertia sweep instead: each member its own principal moments about
 (1, 2, 3) (`member_inertias`), `jaxrb.simulate_batch(..., batched_scene=True)` against the
 stages written out, the error against each member's exact flow, and the reverse gradient
-with respect to every member's J (`b1_fused_per_member.json` and `.png`).
+with respect to every member's J (`b1_fused_per_member.json` and `.png`). With `--extras`,
+what B1's rows leave out (`extras_rows`): a full inertia tensor, saves between the ends and
+forward-mode derivatives (`b1_fused_extras.json`).
 
 On a CPU the fused step is not used by `simulate` (its kernel is Triton's); this script then
 says so and stops.
@@ -120,14 +123,15 @@ def _row(timed, n, method, dname, tol, error, compiled):
     return row
 
 
-def reverse_gradient_rows(loss_with, x, n, what):
-    """Rows of the reverse gradient of `loss_with(solver)` at `x` (n bodies), Dopri8 fused
-    and written out, and their agreement (largest entry's relative difference)."""
-    rows, grads = [], {}
+def derivative_rows(derivative_with, x, n, what):
+    """Rows of `derivative_with(solver)` (a function of `x`, n bodies: a gradient, a
+    directional derivative) for Dopri8 fused and written out, and the two results'
+    agreement (the largest entry's relative difference)."""
+    rows, results = [], {}
     for way, solver in _solvers("Dopri8").items():
-        first, best, grads[way] = C.time_jax(jax.jit(jax.grad(loss_with(solver))), x)
+        first, best, results[way] = C.time_jax(jax.jit(derivative_with(solver)), x)
         row = dict(
-            method=f"{way}, Dopri8: reverse gradient w.r.t. {what} ({CHECKPOINTS} checkpoints)",
+            method=f"{way}, Dopri8: {what}",
             dtype="float64",
             tol=GRAD_TOL,
             us_per_body=best / n * 1e6,
@@ -135,15 +139,17 @@ def reverse_gradient_rows(loss_with, x, n, what):
         )
         print(json.dumps(row), flush=True)
         rows.append(row)
-    a, b = grads["fused"], grads["written out"]
+    a, b = results["fused"], results["written out"]
     agree = float(jnp.max(jnp.abs(a - b)) / jnp.max(jnp.abs(b)))
-    print(json.dumps(dict(gradient_relative_difference=agree)), flush=True)
-    rows.append(
-        dict(
-            method=f"gradients w.r.t. {what}, fused against written out", relative_difference=agree
-        )
-    )
+    print(json.dumps(dict(relative_difference=agree)), flush=True)
+    rows.append(dict(method=f"{what}: fused against written out", relative_difference=agree))
     return rows
+
+
+def reverse_gradient_rows(loss_with, x, n, what):
+    """`derivative_rows` of the reverse gradient of `loss_with(solver)` w.r.t. `what`."""
+    label = f"reverse gradient w.r.t. {what} ({CHECKPOINTS} checkpoints)"
+    return derivative_rows(lambda solver: jax.grad(loss_with(solver)), x, n, label)
 
 
 def gradient_rows(n):
@@ -235,6 +241,80 @@ def per_member_rows(n, grad_n):
     return rows + reverse_gradient_rows(loss_with, inertia, grad_n, "every member's J")
 
 
+TURN = jaxrb.axis_angle_to_quat(jnp.array([1.0, 2.0, 3.0]), 0.7)  # principal -> body axes
+SAVES = 11
+
+
+def extras_rows(n):
+    """What the fused step does beyond B1's rows, fused against written out (Dopri8 at
+    `GRAD_TOL`, float64): B1's body turned by the fixed rotation `TURN` (an inertia tensor
+    with products of inertia; the exact flow is B1's in the principal axes, turned back),
+    `SAVES` saves over the run (the dense output between steps; error the worst over the
+    saves), and forward-mode derivatives (`diffrax.ForwardMode`: the final state's
+    directional derivative along a random tangent of every omega0) with their agreement."""
+    omega0 = initial_omegas(n)
+    Q = jaxrb.quat_to_matrix(TURN)  # body axes of a principal axis: columns
+    body = jaxrb.RigidBody(1.0, Q @ jnp.diag(jnp.asarray(INERTIA)) @ Q.T)
+    turned = jaxrb.quat_conjugate(TURN)  # world <- body = (world <- principal) (principal <- body)
+    ts = jnp.linspace(0.0, T_END, SAVES)
+    flow = jax.jit(lambda s: jaxrb.torque_free_flow(jnp.asarray(INERTIA), s, ts))(
+        jaxrb.make_state(omega=omega0)
+    )
+    unit = flow.quat / jnp.linalg.norm(flow.quat, axis=-1, keepdims=True)
+    full_error = error_against(
+        flow.omega[:, -1] @ Q.T, jaxrb.quat_multiply(unit[:, -1], turned), omega0 @ Q.T
+    )
+    save_errors = [error_against(flow.omega[:, k], unit[:, k], omega0) for k in range(SAVES)]
+
+    def saves_error(omega, quat):
+        return max(e(omega[:, k], quat[:, k]) for k, e in enumerate(save_errors))
+
+    cases = (  # (label, scene, initial states, save times, error of (omega, quat))
+        ("inertia with products", jaxrb.Scene(body), jaxrb.make_state(
+            quat=jnp.broadcast_to(turned, (n, 4)), omega=omega0 @ Q.T), ts[jnp.array([0, -1])],
+            lambda w, q: full_error(w[:, -1], q[:, -1])),
+        (f"{SAVES} saves", scene_for(jnp.float64), jaxrb.make_state(omega=omega0), ts,
+            saves_error),
+    )  # fmt: skip
+    rows = []
+    for label, scene, states0, times, error in cases:
+        for way, solver in _solvers("Dopri8").items():
+
+            def run(states0, solver=solver, scene=scene, times=times):
+                return jaxrb.simulate(
+                    scene, states0, times, solver=solver, rtol=GRAD_TOL, atol=GRAD_TOL,
+                    max_steps=10**5, throw=False,
+                )  # fmt: skip
+
+            first, best, traj = C.time_jax(jax.jit(run), states0)
+            row = dict(
+                method=f"{way}, Dopri8, {label}",
+                dtype="float64",
+                tol=GRAD_TOL,
+                error=error(traj.states.omega, traj.states.quat),
+                us_per_body=best / n * 1e6,
+                compile_s=first - best,
+                steps=int(traj.num_steps[0]),
+            )
+            print(json.dumps(row), flush=True)
+            rows.append(row)
+    tangent = jax.random.normal(jax.random.key(3), (n, 3))
+    scene, ends = scene_for(jnp.float64), ts[jnp.array([0, -1])]
+
+    def directional_with(solver):
+        def final(w):
+            traj = jaxrb.simulate(
+                scene, jaxrb.make_state(omega=w), ends, solver=solver, rtol=GRAD_TOL,
+                atol=GRAD_TOL, adjoint=dfx.ForwardMode(), throw=False,
+            )  # fmt: skip
+            return jnp.concatenate([traj.states.quat[:, -1], traj.states.omega[:, -1]], -1)
+
+        return lambda w: jax.jvp(final, (w,), (tangent,))[1]
+
+    label = "forward-mode derivative along a tangent of all omega0"
+    return rows + derivative_rows(directional_with, omega0, n, label)
+
+
 def plot(results_path):
     """Work against precision of a saved run (`b1_fused.json`, `b1_fused_per_member.json`):
     error against us per body, one line per method and dtype; written beside it, the same
@@ -274,6 +354,11 @@ def main():
     p.add_argument(
         "--per-member", action="store_true", help="an inertia sweep instead (one J per member)"
     )
+    p.add_argument(
+        "--extras",
+        action="store_true",
+        help="instead: a full inertia tensor, saves between the ends, forward mode",
+    )
     a = p.parse_args()
     if a.plot:
         plot(a.plot)
@@ -283,11 +368,14 @@ def main():
         return
     name = "b1_fused_gradient.json" if a.no_solve else "b1_fused.json"
     name = "b1_fused_per_member.json" if a.per_member else name
-    picture = [] if a.no_solve else [name.replace(".json", ".png")]
+    name = "b1_fused_extras.json" if a.extras else name
+    picture = [] if a.no_solve or a.extras else [name.replace(".json", ".png")]
     path, *_ = C.output_paths(p, a.out, [name, *picture], a.force)
     device = C.device_name()
     print(f"device {device}, jax {jax.__version__}, N = {a.n}", flush=True)
-    if a.per_member:
+    if a.extras:
+        rows = extras_rows(a.n)
+    elif a.per_member:
         rows = per_member_rows(a.n, a.grad_n)
     else:
         rows = [] if a.no_solve else solve_rows(a.n)
@@ -295,7 +383,7 @@ def main():
     with open(path, "w") as f:
         json.dump(dict(device=device, n=a.n, grad_n=a.grad_n, rows=rows), f, indent=1)
     print(f"wrote {os.path.abspath(path)}")
-    if rows and not a.no_solve:
+    if rows and not (a.no_solve or a.extras):
         plot(path)
 
 
