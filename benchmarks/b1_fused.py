@@ -87,7 +87,7 @@ def exact(omega0):
 
 def solve_rows(n):
     omega0 = initial_omegas(n)
-    error = error_against(*exact(omega0), omega0)
+    error = at_end(error_against(*exact(omega0), omega0))
     rows = []
     for dname, solver_name, tols in ROWS:
         dtype = jnp.dtype(dname)
@@ -106,15 +106,22 @@ def solve_rows(n):
     return rows
 
 
+def at_end(error):
+    """An error function of whole trajectories' (omega (N, S, 3), quat (N, S, 4)) from one
+    of their final values (`error_against`)."""
+    return lambda omega, quat: error(omega[:, -1], quat[:, -1])
+
+
 def _row(timed, n, method, dname, tol, error, compiled):
-    """A solve's row from `C.time_jax`'s (first, best, trajectory); its compile time where
-    `compiled` (the first call of its program)."""
+    """A solve's row from `C.time_jax`'s (first, best, trajectory), `error` of the
+    trajectory's (omega, quat); its compile time where `compiled` (the first call of its
+    program)."""
     first, best, traj = timed
     row = dict(
         method=method,
         dtype=dname,
         tol=tol,
-        error=error(traj.states.omega[:, -1], traj.states.quat[:, -1]),
+        error=error(traj.states.omega, traj.states.quat),
         us_per_body=best / n * 1e6,
         compile_s=first - best if compiled else None,
         steps=int(traj.num_steps[0]),
@@ -201,7 +208,7 @@ def per_member_rows(n, grad_n):
         jax.vmap(lambda J, w: jaxrb.torque_free_flow(J, jaxrb.make_state(omega=w), T_END))
     )(inertia, omega0)
     unit = flow.quat / jnp.linalg.norm(flow.quat, axis=-1, keepdims=True)
-    error = error_against(flow.omega, unit, omega0)
+    error = at_end(error_against(flow.omega, unit, omega0))
     rows = []
     for dname, solver_name, tols in PER_MEMBER_ROWS:
         dtype = jnp.dtype(dname)
@@ -261,8 +268,10 @@ def extras_rows(n):
         jaxrb.make_state(omega=omega0)
     )
     unit = flow.quat / jnp.linalg.norm(flow.quat, axis=-1, keepdims=True)
-    full_error = error_against(
-        flow.omega[:, -1] @ Q.T, jaxrb.quat_multiply(unit[:, -1], turned), omega0 @ Q.T
+    full_error = at_end(
+        error_against(
+            flow.omega[:, -1] @ Q.T, jaxrb.quat_multiply(unit[:, -1], turned), omega0 @ Q.T
+        )
     )
     save_errors = [error_against(flow.omega[:, k], unit[:, k], omega0) for k in range(SAVES)]
 
@@ -272,7 +281,7 @@ def extras_rows(n):
     cases = (  # (label, scene, initial states, save times, error of (omega, quat))
         ("inertia with products", jaxrb.Scene(body), jaxrb.make_state(
             quat=jnp.broadcast_to(turned, (n, 4)), omega=omega0 @ Q.T), ts[jnp.array([0, -1])],
-            lambda w, q: full_error(w[:, -1], q[:, -1])),
+            full_error),
         (f"{SAVES} saves", scene_for(jnp.float64), jaxrb.make_state(omega=omega0), ts,
             saves_error),
     )  # fmt: skip
@@ -286,18 +295,8 @@ def extras_rows(n):
                     max_steps=10**5, throw=False,
                 )  # fmt: skip
 
-            first, best, traj = C.time_jax(jax.jit(run), states0)
-            row = dict(
-                method=f"{way}, Dopri8, {label}",
-                dtype="float64",
-                tol=GRAD_TOL,
-                error=error(traj.states.omega, traj.states.quat),
-                us_per_body=best / n * 1e6,
-                compile_s=first - best,
-                steps=int(traj.num_steps[0]),
-            )
-            print(json.dumps(row), flush=True)
-            rows.append(row)
+            timed = C.time_jax(jax.jit(run), states0)
+            rows.append(_row(timed, n, f"{way}, Dopri8, {label}", "float64", GRAD_TOL, error, True))
     tangent = jax.random.normal(jax.random.key(3), (n, 3))
     scene, ends = scene_for(jnp.float64), ts[jnp.array([0, -1])]
 
